@@ -1,0 +1,395 @@
+"""The internal scene: inert numpy arrays and small dataclasses, no ``bpy``.
+
+Everything the renderer needs and nothing more. Exporters (``engine/blender/export.py``)
+and tests build a :class:`Scene`; the stages only read it.
+
+Units are SI and radiometric, following the seed (section 3 and the table of symbols, 16.2)
+and Blender's conventions as measured against Cycles (DESIGN.md section 3):
+
+==================  ==========================================================================
+quantity            meaning
+==================  ==========================================================================
+positions           metres, world space, Z up (Blender's)
+``diffuse``         diffuse reflectance rho_d per RGB channel, in [0, 1]; BRDF rho_d / pi
+``specular``        perfect specular reflectance rho_s per channel, in [0, 1]
+``exitance``        radiant exitance M [W/m^2] per channel; radiance L = M / pi per emitting side
+point ``flux``      radiant flux Phi [W] per channel; E = Phi cos(theta) / (4 pi r^2) (Eq. 7.1)
+sun ``irradiance``  W/m^2 at normal incidence per channel
+area ``power``      W per channel; one-sided Lambertian, L = P / (pi A)
+world ``radiance``  W m^-2 sr^-1 per channel, a uniform environment
+==================  ==========================================================================
+
+Triangles are stored as a float32 array ``(T, 3, 3)`` (triangle, corner, xyz) with per-corner
+shading normals of the same shape, a material id and an object id per triangle. Surfaces are
+two-sided; the geometric normal is turned towards the incoming ray at shading time.
+
+:func:`Scene.validate` checks shapes, dtypes and values and drops triangles that cannot be
+traced (NaN or infinite corners, zero area), counting them in ``warnings``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = [
+    "Material", "PointLight", "SpotLight", "SunLight", "AreaLight", "World", "Camera", "Scene",
+    "SceneError",
+]
+
+
+class SceneError(ValueError):
+    """Raised for input that cannot be rendered; the message names the object and the problem."""
+
+
+def _rgb(value, name: str, what: str) -> np.ndarray:
+    arr = np.broadcast_to(np.asarray(value, dtype=np.float64), (3,)).copy()
+    if not np.all(np.isfinite(arr)):
+        raise SceneError(f"{name}: {what} is not finite ({arr.tolist()})")
+    if np.any(arr < 0):
+        raise SceneError(f"{name}: {what} is negative ({arr.tolist()})")
+    return arr
+
+
+def _vec3(value, name: str, what: str) -> np.ndarray:
+    arr = np.asarray(value, dtype=np.float64).reshape(3)
+    if not np.all(np.isfinite(arr)):
+        raise SceneError(f"{name}: {what} is not finite ({arr.tolist()})")
+    return arr
+
+
+def _unit(value, name: str, what: str) -> np.ndarray:
+    arr = _vec3(value, name, what)
+    norm = np.linalg.norm(arr)
+    if norm < 1e-12:
+        raise SceneError(f"{name}: {what} has zero length")
+    return arr / norm
+
+
+@dataclass
+class Material:
+    """The seed's three radiometric properties (section 3.2)."""
+
+    name: str
+    diffuse: np.ndarray = field(default_factory=lambda: np.full(3, 0.8))
+    specular: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    exitance: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    emit_both_sides: bool = True  # Cycles emits from both faces of an emissive mesh
+
+    def __post_init__(self):
+        self.diffuse = _rgb(self.diffuse, self.name, "diffuse reflectance")
+        self.specular = _rgb(self.specular, self.name, "specular reflectance")
+        self.exitance = _rgb(self.exitance, self.name, "radiant exitance")
+
+    @property
+    def is_emissive(self) -> bool:
+        return bool(np.any(self.exitance > 0))
+
+
+@dataclass
+class PointLight:
+    """Isotropic point light of radiant flux ``flux`` [W] (seed 3.3.1, Eq. 7.1)."""
+
+    name: str
+    position: np.ndarray
+    flux: np.ndarray
+
+    def __post_init__(self):
+        self.position = _vec3(self.position, self.name, "position")
+        self.flux = _rgb(self.flux, self.name, "flux")
+
+
+@dataclass
+class SpotLight:
+    """A point light masked to a cone, as Blender's spot: same intensity Phi/(4 pi) on axis.
+
+    ``direction`` is the cone axis (the way light travels). ``half_angle`` [rad] is half of
+    Blender's spot size; ``blend`` in [0, 1] is Blender's spot blend (smooth edge).
+    """
+
+    name: str
+    position: np.ndarray
+    direction: np.ndarray
+    flux: np.ndarray
+    half_angle: float
+    blend: float = 0.0
+
+    def __post_init__(self):
+        self.position = _vec3(self.position, self.name, "position")
+        self.direction = _unit(self.direction, self.name, "direction")
+        self.flux = _rgb(self.flux, self.name, "flux")
+        if not (0.0 < self.half_angle <= np.pi):
+            raise SceneError(f"{self.name}: spot half angle {self.half_angle} rad is outside (0, pi]")
+        self.blend = float(np.clip(self.blend, 0.0, 1.0))
+
+
+@dataclass
+class SunLight:
+    """Distant light: ``irradiance`` [W/m^2] at normal incidence arriving along ``direction``.
+
+    ``direction`` is the way the light travels (Blender: the sun's local -Z). ``angle`` [rad] is
+    the full angular diameter of the sun's disc (Blender's Angle); 0 gives a hard shadow.
+    """
+
+    name: str
+    direction: np.ndarray
+    irradiance: np.ndarray
+    angle: float = 0.0
+
+    def __post_init__(self):
+        self.direction = _unit(self.direction, self.name, "direction")
+        self.irradiance = _rgb(self.irradiance, self.name, "irradiance")
+        self.angle = float(np.clip(self.angle, 0.0, np.pi))
+
+
+AREA_SHAPES = ("SQUARE", "RECTANGLE", "DISK", "ELLIPSE")
+
+
+@dataclass
+class AreaLight:
+    """A planar one-sided Lambertian emitter, Blender's area light.
+
+    ``matrix`` is the 4x4 world matrix; the light lies in its local XY plane, centred at the
+    origin, and emits towards local -Z. ``size_x``/``size_y`` [m] are the side lengths (the
+    diameters for disk and ellipse) before the matrix's scale, which is applied. ``power`` [W]
+    per channel gives radiance L = P / (pi A). ``collimated`` marks Blender's Spread ~ 0: the
+    seed's circular directional light (Eq. 7.2), all light along the normal.
+    """
+
+    name: str
+    shape: str
+    matrix: np.ndarray
+    size_x: float
+    size_y: float
+    power: np.ndarray
+    collimated: bool = False
+
+    def __post_init__(self):
+        self.matrix = np.asarray(self.matrix, dtype=np.float64).reshape(4, 4)
+        if not np.all(np.isfinite(self.matrix)):
+            raise SceneError(f"{self.name}: transform is not finite")
+        if self.shape not in AREA_SHAPES:
+            raise SceneError(f"{self.name}: unknown area light shape {self.shape!r}")
+        self.power = _rgb(self.power, self.name, "power")
+        if self.shape in ("SQUARE", "DISK"):
+            self.size_y = self.size_x
+        if not (self.size_x > 0 and self.size_y > 0):
+            raise SceneError(f"{self.name}: area light size must be positive")
+
+    # Derived geometry in world space -------------------------------------------------------
+    @property
+    def center(self) -> np.ndarray:
+        return self.matrix[:3, 3].copy()
+
+    @property
+    def axis_u(self) -> np.ndarray:
+        """Half-extent vector along the light's local X (world space, scale applied)."""
+        return self.matrix[:3, 0] * (0.5 * self.size_x)
+
+    @property
+    def axis_v(self) -> np.ndarray:
+        return self.matrix[:3, 1] * (0.5 * self.size_y)
+
+    @property
+    def normal(self) -> np.ndarray:
+        """Unit emission direction (local -Z in world space)."""
+        n = np.cross(self.axis_u, self.axis_v)
+        norm = np.linalg.norm(n)
+        if norm == 0:
+            raise SceneError(f"{self.name}: area light is degenerate (zero scale)")
+        return -n / norm
+
+    @property
+    def area(self) -> float:
+        """World-space area [m^2]."""
+        parallelogram = 4.0 * np.linalg.norm(np.cross(self.axis_u, self.axis_v))
+        return float(parallelogram * (np.pi / 4.0 if self.shape in ("DISK", "ELLIPSE") else 1.0))
+
+    @property
+    def radiance(self) -> np.ndarray:
+        return self.power / (np.pi * self.area)
+
+
+@dataclass
+class World:
+    """A constant environment of radiance ``radiance`` [W m^-2 sr^-1] from every direction."""
+
+    radiance: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    def __post_init__(self):
+        self.radiance = _rgb(self.radiance, "World", "colour")
+
+    @property
+    def is_black(self) -> bool:
+        return not bool(np.any(self.radiance > 0))
+
+
+@dataclass
+class Camera:
+    """A pinhole camera, Blender's perspective camera with sensor fit and shift resolved.
+
+    ``matrix`` is the 4x4 camera-to-world matrix (the camera looks along local -Z, +Y is up).
+    ``tan_half_x``/``tan_half_y`` are the half extents of the full frame on the plane at unit
+    distance; ``shift_x``/``shift_y`` move the frame on that plane (same units). ``clip_start``
+    [m] is the seed's image-plane distance: nothing nearer is visible. ``resolution`` is the
+    full frame (width, height) in pixels; ``border`` = (x0, y0, x1, y1) in pixels, y from the
+    bottom like Blender, x1/y1 exclusive, selects the rendered window (the whole frame when
+    None).
+    """
+
+    matrix: np.ndarray
+    tan_half_x: float
+    tan_half_y: float
+    resolution: tuple[int, int]
+    shift_x: float = 0.0
+    shift_y: float = 0.0
+    clip_start: float = 1e-3
+    clip_end: float = 1e30
+    border: tuple[int, int, int, int] | None = None
+    name: str = "Camera"
+
+    def __post_init__(self):
+        self.matrix = np.asarray(self.matrix, dtype=np.float64).reshape(4, 4)
+        if not np.all(np.isfinite(self.matrix)):
+            raise SceneError(f"{self.name}: transform is not finite")
+        w, h = (int(v) for v in self.resolution)
+        if w < 1 or h < 1:
+            raise SceneError(f"{self.name}: resolution {w}x{h} must be at least 1x1")
+        self.resolution = (w, h)
+        if not (self.tan_half_x > 0 and self.tan_half_y > 0):
+            raise SceneError(f"{self.name}: field of view must be positive")
+        if self.border is None:
+            self.border = (0, 0, w, h)
+        x0, y0, x1, y1 = (int(v) for v in self.border)
+        x0, x1 = max(0, x0), min(w, x1)
+        y0, y1 = max(0, y0), min(h, y1)
+        if x1 <= x0 or y1 <= y0:
+            raise SceneError(f"{self.name}: render border {self.border} is empty")
+        self.border = (x0, y0, x1, y1)
+
+    @property
+    def window_size(self) -> tuple[int, int]:
+        x0, y0, x1, y1 = self.border
+        return x1 - x0, y1 - y0
+
+    @classmethod
+    def look_at(cls, eye, target, up=(0.0, 0.0, 1.0), fov_x_deg: float = 60.0,
+                resolution=(64, 48), **kwargs) -> "Camera":
+        """Convenience for tests: a camera at ``eye`` looking at ``target``."""
+        eye = np.asarray(eye, float)
+        forward = np.asarray(target, float) - eye
+        forward /= np.linalg.norm(forward)
+        right = np.cross(forward, np.asarray(up, float))
+        if np.linalg.norm(right) < 1e-9:
+            right = np.cross(forward, [0.0, 1.0, 0.0])
+        right /= np.linalg.norm(right)
+        true_up = np.cross(right, forward)
+        m = np.eye(4)
+        m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = right, true_up, -forward, eye
+        tx = np.tan(np.radians(fov_x_deg) / 2)
+        w, h = resolution
+        return cls(matrix=m, tan_half_x=tx, tan_half_y=tx * h / w, resolution=resolution, **kwargs)
+
+
+@dataclass
+class Scene:
+    """Triangles, materials, lights, world and camera. See the module docstring for units."""
+
+    triangles: np.ndarray                 # (T, 3, 3) float32, world space [m]
+    material_ids: np.ndarray              # (T,) int32 into ``materials``
+    materials: list[Material]
+    camera: Camera
+    shading_normals: np.ndarray | None = None   # (T, 3, 3) float32, unit; None = flat
+    object_ids: np.ndarray | None = None  # (T,) int32 into ``object_names``
+    object_names: list[str] = field(default_factory=list)
+    lights: list = field(default_factory=list)
+    world: World = field(default_factory=World)
+    warnings: list[str] = field(default_factory=list)
+    stats: dict = field(default_factory=dict)
+
+    def validate(self) -> "Scene":
+        """Check the arrays, drop untraceable triangles and report them. Returns ``self``."""
+        tris = np.asarray(self.triangles, dtype=np.float32)
+        if tris.ndim != 3 or tris.shape[1:] != (3, 3):
+            tris = tris.reshape(-1, 3, 3) if tris.size % 9 == 0 else None
+            if tris is None:
+                raise SceneError("Scene: triangles must have shape (T, 3, 3)")
+        count = len(tris)
+        mids = np.asarray(self.material_ids, dtype=np.int32).reshape(-1)
+        if len(mids) != count:
+            raise SceneError(f"Scene: {len(mids)} material ids for {count} triangles")
+        if count and (mids.min() < 0 or mids.max() >= len(self.materials)):
+            raise SceneError("Scene: a triangle names a material that does not exist")
+        oids = (np.zeros(count, np.int32) if self.object_ids is None
+                else np.asarray(self.object_ids, dtype=np.int32).reshape(-1))
+        if not self.object_names:
+            self.object_names = ["Mesh"]
+        normals = None if self.shading_normals is None else np.asarray(self.shading_normals, np.float32)
+        if normals is not None and normals.shape != tris.shape:
+            raise SceneError("Scene: shading normals must match the triangles' shape")
+
+        # Drop NaN / infinite corners and zero-area triangles, naming the objects.
+        finite = np.all(np.isfinite(tris), axis=(1, 2))
+        e1 = tris[:, 1].astype(np.float64) - tris[:, 0]
+        e2 = tris[:, 2].astype(np.float64) - tris[:, 0]
+        with np.errstate(invalid="ignore", over="ignore"):
+            doubled_area = np.linalg.norm(np.cross(e1, e2), axis=1)
+        scale = np.max(np.abs(tris[finite]), initial=1.0) if count else 1.0
+        keep = finite & (doubled_area > (scale * 1e-7) ** 2)
+        if count and not np.all(keep):
+            for reason, mask in (("non-finite vertices", ~finite), ("zero area", finite & ~keep)):
+                if np.any(mask):
+                    names = sorted({self.object_names[i] if 0 <= i < len(self.object_names) else "?"
+                                    for i in np.unique(oids[mask])})
+                    self.warnings.append(
+                        f"{', '.join(names)}: skipped {int(mask.sum())} triangles with {reason}")
+            self.stats["skipped_triangles"] = int((~keep).sum())
+        self.triangles = np.ascontiguousarray(tris[keep])
+        self.material_ids = np.ascontiguousarray(mids[keep])
+        self.object_ids = np.ascontiguousarray(oids[keep])
+        if normals is not None:
+            normals = normals[keep]
+            bad = ~np.all(np.isfinite(normals), axis=(1, 2))
+            lengths = np.linalg.norm(normals, axis=2)
+            bad |= np.any(lengths < 1e-6, axis=1)
+            if np.any(bad):
+                normals[bad] = self.geometric_normals()[bad][:, None, :]
+                lengths = np.linalg.norm(normals, axis=2)
+            normals = normals / lengths[..., None]
+            self.shading_normals = np.ascontiguousarray(normals, dtype=np.float32)
+        return self
+
+    # Derived quantities ----------------------------------------------------------------------
+    def geometric_normals(self) -> np.ndarray:
+        """Unit geometric normals (T, 3) float32, from the corner winding."""
+        t = self.triangles.astype(np.float64)
+        n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+        norm = np.linalg.norm(n, axis=1, keepdims=True)
+        return (n / np.where(norm > 0, norm, 1.0)).astype(np.float32)
+
+    def triangle_areas(self) -> np.ndarray:
+        t = self.triangles.astype(np.float64)
+        return 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Axis-aligned bounds of the geometry (and the camera position) [m]."""
+        pts = [self.camera.matrix[:3, 3][None]]
+        if len(self.triangles):
+            pts.append(self.triangles.reshape(-1, 3).astype(np.float64))
+        allp = np.concatenate(pts)
+        return allp.min(axis=0), allp.max(axis=0)
+
+    @property
+    def extent(self) -> float:
+        """Diagonal of the bounds [m]; sets the ray offsets and default radii."""
+        lo, hi = self.bounds()
+        return float(max(np.linalg.norm(hi - lo), 1e-30))
+
+    def material_table(self) -> dict[str, np.ndarray]:
+        """Materials as (M, 3) float32 arrays, indexed by material id."""
+        return {
+            "diffuse": np.array([m.diffuse for m in self.materials], np.float32).reshape(-1, 3),
+            "specular": np.array([m.specular for m in self.materials], np.float32).reshape(-1, 3),
+            "exitance": np.array([m.exitance for m in self.materials], np.float32).reshape(-1, 3),
+            "both_sides": np.array([m.emit_both_sides for m in self.materials], bool),
+        }
