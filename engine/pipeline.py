@@ -1,21 +1,78 @@
-"""The pipeline: runs the stages in a fixed order, times each and fills the report.
+"""The pipeline: builds the stages in a fixed order, times each and fills the report.
 
-(Placeholder while the stages land; the signature below is the contract.)
+What it computes
+    ``render(scene, settings)`` -> ``RenderResult`` with the Combined image (linear radiance
+    [W m^-2 sr^-1], (H, W, 3) float32, row 0 at the top of the render window) and a report.
+
+Stages, in order (DESIGN.md §1)
+    1. ``validate``     check the scene, drop untraceable triangles (counted, named)
+    2. ``accel_build``  Embree BVH over all triangles
+    3. ``lights``       sort lights into exactly evaluated and sampled ones
+    4. ``camera``       primary rays in batches of whole pixels; at each hit the emission, the
+                        direct light (``engine/direct.py``) and, on perfect specular surfaces,
+                        the reflected ray (up to ``max_specular_depth``)
+
+    Batches are independent (each has its own random stream from (seed, batch)), so they run
+    on a thread pool (embreex and numpy release the GIL) and a fixed seed gives the same
+    picture whatever the scheduling. Between batches ``progress(fraction, text)`` is called
+    and ``cancelled()`` is polled; a batch takes well under a second, so Esc acts quickly.
+
+Settings (``RenderSettings``)
+    =====================  ========  ===========================================================
+    name                   default   meaning
+    =====================  ========  ===========================================================
+    samples                16        camera samples per pixel
+    light_samples          4         samples per shading point shared by area/mesh/world lights
+    bounces                0         indirect bounces; 0 = direct light only
+    seed                   0         random seed; same seed, same image
+    threads                0         worker threads; 0 = all cores
+    filter_width           1.5       Blackman-Harris pixel filter width [px]
+    max_specular_depth     8         perfect-mirror reflections followed from the camera
+    =====================  ========  ===========================================================
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import os
+import resource
+import time
+from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+from dataclasses import asdict, dataclass, field
+
 import numpy as np
+
+from . import sampling
+from .accel import Accelerator
+from .camera import pixel_rays
+from .direct import direct_irradiance
+from .lights import LightSet
+from .scene import Scene, SceneError
+
+TARGET_BATCH_SAMPLES = 1 << 16
 
 
 @dataclass
 class RenderSettings:
-    samples: int = 16          # camera samples per pixel
-    light_samples: int = 4     # area / mesh / world light samples per camera hit
-    bounces: int = 0           # indirect bounces; 0 = direct light only
+    samples: int = 16
+    light_samples: int = 4
+    bounces: int = 0
     seed: int = 0
-    threads: int = 2
-    filter_width: float = 1.5  # pixels, Blackman-Harris
+    threads: int = 0
+    filter_width: float = 1.5
+    max_specular_depth: int = 8
+
+    def validate(self) -> "RenderSettings":
+        checks = [("samples", self.samples >= 1), ("light_samples", self.light_samples >= 0),
+                  ("bounces", self.bounces >= 0), ("threads", self.threads >= 0),
+                  ("filter_width", 0 <= self.filter_width <= 10),
+                  ("max_specular_depth", self.max_specular_depth >= 0)]
+        for name, ok in checks:
+            if not ok:
+                raise SceneError(f"Render settings: {name} = {getattr(self, name)} is out of range")
+        return self
+
+    @property
+    def worker_count(self) -> int:
+        return self.threads or os.cpu_count() or 1
 
 
 @dataclass
@@ -26,9 +83,205 @@ class RenderResult:
     cancelled: bool = False
 
 
-def render(scene, settings=None, progress=None, cancelled=None) -> RenderResult:
-    """Render ``scene``; ``progress(fraction, text)`` is called between batches and
-    ``cancelled()`` is polled there (return True to stop early)."""
-    settings = settings or RenderSettings()
-    w, h = scene.camera.window_size
-    return RenderResult(image=np.zeros((h, w, 3), np.float32), report={"stages": {}})
+class _SceneArrays:
+    """Per-triangle data the shading needs, gathered once."""
+
+    def __init__(self, scene: Scene):
+        table = scene.material_table()
+        self.diffuse = table["diffuse"].astype(np.float64)
+        self.specular = table["specular"].astype(np.float64)
+        self.emitted_radiance = table["exitance"].astype(np.float64) / np.pi
+        self.both_sides = table["both_sides"]
+        self.material_ids = scene.material_ids
+        self.geometric_normals = scene.geometric_normals().astype(np.float64)
+        self.shading_normals = scene.shading_normals
+        self.has_specular = bool(np.any(self.specular > 0))
+        self.has_emission = bool(np.any(self.emitted_radiance > 0))
+
+
+def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArrays,
+                        accel: Accelerator, lights: LightSet, settings: RenderSettings,
+                        ray_log: list | None):
+    """Radiance for the pixels of one batch: (pixels, 3) mean over their samples."""
+    stats = {"camera_rays": 0, "shadow_rays": 0, "specular_rays": 0,
+             "trace_seconds": 0.0, "seconds": 0.0}
+    started = time.perf_counter()
+    rng = sampling.rng_for(settings.seed, sampling.STREAM_CAMERA, batch)
+    p0, p1 = pixel_range
+    spp = settings.samples
+    origins, directions, tmax = pixel_rays(scene.camera, p0, p1, spp, rng, settings.filter_width)
+    count = len(origins)
+    radiance = np.zeros((count, 3))
+    throughput = np.ones((count, 3))
+    ray_of = np.arange(count)
+    world = scene.world.radiance
+    for depth in range(settings.max_specular_depth + 1):
+        if len(ray_of) == 0:
+            break
+        if ray_log is not None:
+            ray_log.append(("camera" if depth == 0 else "specular", origins, directions, tmax))
+        t0 = time.perf_counter()
+        _t, prim, bu, bv = accel.intersect(origins, directions, tmax)
+        stats["trace_seconds"] += time.perf_counter() - t0
+        stats["camera_rays" if depth == 0 else "specular_rays"] += len(origins)
+        hit = prim >= 0
+        if not scene.world.is_black and not np.all(hit):
+            radiance[ray_of[~hit]] += throughput[~hit] * world
+        if not np.any(hit):
+            break
+        prim, bu, bv = prim[hit], bu[hit], bv[hit]
+        d = directions[hit]
+        rays = ray_of[hit]
+        thr = throughput[hit]
+        x = accel.hit_points(prim, bu, bv)
+        ng = arrays.geometric_normals[prim]
+        front = np.einsum("ij,ij->i", ng, d) < 0          # the ray meets the wound front side
+        ng = np.where(front[:, None], ng, -ng)              # towards the viewer
+        if arrays.shading_normals is not None:
+            corner = arrays.shading_normals[prim].astype(np.float64)
+            w = np.stack([1.0 - bu - bv, bu, bv], axis=1)[..., None]
+            ns = (corner * w).sum(axis=1)
+            ns = np.where(front[:, None], ns, -ns)
+            ns /= np.maximum(np.linalg.norm(ns, axis=1, keepdims=True), 1e-12)
+            # A shading normal that points away from the viewer would shade the wrong side.
+            ns = np.where((np.einsum("ij,ij->i", ns, d) < 0)[:, None], ns, ng)
+        else:
+            ns = ng
+        mat = arrays.material_ids[prim]
+
+        if arrays.has_emission:
+            emitted = arrays.emitted_radiance[mat] * (front | arrays.both_sides[mat])[:, None]
+            radiance[rays] += thr * emitted
+
+        rho_d = arrays.diffuse[mat]
+        diffuse = np.any(rho_d > 0, axis=1)
+        if np.any(diffuse):
+            idx = np.nonzero(diffuse)[0]
+            shadow_stats = {}
+            e = direct_irradiance(x[idx], ns[idx], lights, accel, rng, settings.light_samples,
+                                  stats=shadow_stats, offset_normals=ng[idx], ray_log=ray_log)
+            stats["shadow_rays"] += shadow_stats.get("shadow_rays", 0)
+            stats["trace_seconds"] += shadow_stats.get("trace_seconds", 0.0)
+            radiance[rays[idx]] += thr[idx] * rho_d[idx] * e / np.pi
+
+        if not arrays.has_specular or depth == settings.max_specular_depth:
+            break
+        rho_s = arrays.specular[mat]
+        mirror = np.any(rho_s > 0, axis=1)
+        if not np.any(mirror):
+            break
+        idx = np.nonzero(mirror)[0]
+        dm, nm = d[idx], ns[idx]
+        reflected = dm - 2.0 * np.einsum("ij,ij->i", dm, nm)[:, None] * nm
+        origins = accel.offset_origins(x[idx], ng[idx], reflected)
+        directions = reflected
+        tmax = None
+        throughput = thr[idx] * rho_s[idx]
+        ray_of = rays[idx]
+
+    pixels = radiance.reshape(-1, spp, 3).mean(axis=1)
+    stats["seconds"] = time.perf_counter() - started
+    return pixels, stats
+
+
+def render(scene: Scene, settings: RenderSettings | None = None, progress=None, cancelled=None,
+           ray_log: list | None = None) -> RenderResult:
+    """Render ``scene``. ``progress(fraction, text)`` is called between batches and
+    ``cancelled()`` polled there (return True to stop early). ``ray_log``, when a list,
+    receives every traced batch of rays (benchmarks re-trace them with raw Embree)."""
+    settings = (settings or RenderSettings()).validate()
+    total_start = time.perf_counter()
+    report = {"seed": settings.seed, "settings": asdict(settings), "stages": {}, "warnings": []}
+    stages = report["stages"]
+
+    def stage(name, seconds, **extra):
+        stages[name] = {"seconds": round(seconds, 6), **extra}
+
+    def tell(fraction, text):
+        if progress is not None:
+            progress(float(fraction), text)
+
+    # 1. validate
+    t0 = time.perf_counter()
+    scene.validate()
+    report["warnings"].extend(scene.warnings)
+    stage("validate", time.perf_counter() - t0, triangles=int(len(scene.triangles)))
+    if settings.bounces > 0:
+        report["warnings"].append(
+            f"Render settings: bounces = {settings.bounces}, but indirect light is not "
+            "implemented yet; rendering direct light only")
+
+    # 2. accel_build (single-threaded queries: parallelism is across batches)
+    tell(0.0, "Building the BVH")
+    accel = Accelerator(scene.triangles, threads=1)
+    stage("accel_build", accel.build_seconds, triangles=int(len(scene.triangles)))
+
+    # 3. lights
+    t0 = time.perf_counter()
+    lights = LightSet(scene)
+    stage("lights", time.perf_counter() - t0, **lights.describe())
+    if lights.empty and not np.any(scene.material_table()["exitance"] > 0):
+        report["warnings"].append("Scene: no lights, no emissive materials and a black world; "
+                                  "the image is black")
+
+    # 4. camera: batches of whole pixels over a thread pool
+    width, height = scene.camera.window_size
+    pixel_count = width * height
+    batch_pixels = max(1, TARGET_BATCH_SAMPLES // settings.samples)
+    ranges = [(p, min(p + batch_pixels, pixel_count)) for p in range(0, pixel_count, batch_pixels)]
+    arrays = _SceneArrays(scene)
+    image = np.zeros((pixel_count, 3), np.float32)
+    totals = {"camera_rays": 0, "shadow_rays": 0, "specular_rays": 0, "trace_seconds": 0.0,
+              "batch_seconds": 0.0}
+    t0 = time.perf_counter()
+    was_cancelled = False
+    done = 0
+    tell(0.0, f"Direct light: 0/{len(ranges)} batches")
+    with ThreadPoolExecutor(settings.worker_count) as pool:
+        pending = {}
+        queue = list(enumerate(ranges))
+        queue.reverse()
+
+        def submit():
+            while queue and len(pending) < 2 * settings.worker_count:
+                batch, rng_ = queue.pop()
+                fut = pool.submit(_shade_camera_batch, batch, rng_, scene, arrays, accel, lights,
+                                  settings, ray_log)
+                pending[fut] = rng_
+
+        submit()
+        while pending:
+            finished, _ = wait(list(pending), return_when=FIRST_COMPLETED)
+            for fut in finished:
+                a, b = pending.pop(fut)
+                pixels, batch_stats = fut.result()
+                image[a:b] = pixels
+                for key in ("camera_rays", "shadow_rays", "specular_rays", "trace_seconds"):
+                    totals[key] += batch_stats[key]
+                totals["batch_seconds"] += batch_stats["seconds"]
+                done += 1
+            tell(done / len(ranges), f"Direct light: {done}/{len(ranges)} batches")
+            if cancelled is not None and cancelled():
+                was_cancelled = True
+                queue.clear()
+            submit()
+    camera_seconds = time.perf_counter() - t0
+    rays = totals["camera_rays"] + totals["shadow_rays"] + totals["specular_rays"]
+    stage("camera", camera_seconds, batches=len(ranges), batches_done=done,
+          camera_rays=totals["camera_rays"], shadow_rays=totals["shadow_rays"],
+          specular_rays=totals["specular_rays"],
+          trace_thread_seconds=round(totals["trace_seconds"], 6),
+          thread_seconds=round(totals["batch_seconds"], 6),
+          rays_per_second=rays / camera_seconds if camera_seconds > 0 else 0.0)
+
+    report["rays"] = {"camera": totals["camera_rays"], "shadow": totals["shadow_rays"],
+                      "specular": totals["specular_rays"], "total": rays}
+    report["scene"] = {"triangles": int(len(scene.triangles)), "materials": len(scene.materials),
+                       "extent_m": scene.extent, "lights": lights.describe(),
+                       "resolution": list(scene.camera.resolution), "window": list(scene.camera.border)}
+    report["total_seconds"] = round(time.perf_counter() - total_start, 6)
+    report["peak_memory_mb"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1)
+    report["cancelled"] = was_cancelled
+    accel.close()
+    result_image = image.reshape(height, width, 3)
+    return RenderResult(image=result_image, report=report, cancelled=was_cancelled)

@@ -307,6 +307,12 @@ class Scene:
     warnings: list[str] = field(default_factory=list)
     stats: dict = field(default_factory=dict)
 
+    def __post_init__(self):
+        if self.object_ids is None:
+            self.object_ids = np.zeros(len(np.asarray(self.material_ids).reshape(-1)), np.int32)
+        if not self.object_names:
+            self.object_names = ["Mesh"]
+
     def validate(self) -> "Scene":
         """Check the arrays, drop untraceable triangles and report them. Returns ``self``."""
         tris = np.asarray(self.triangles, dtype=np.float32)

@@ -1,0 +1,448 @@
+"""Light models: irradiance at surface points, light sampling, and selection weights.
+
+What it computes
+    ``LightSet(scene)`` sorts the scene's lights into
+    * delta lights, evaluated exactly with one shadow ray each: point (Eq. 7.1), spot (a point
+      light masked to a cone, Blender's falloff), sun with zero angle, and collimated disks /
+      rectangles (Blender's area light with Spread ~ 0: the seed's circular directional light,
+      Eq. 7.2, E = Phi cos(theta) / (pi r^2) inside the beam);
+    * sampled lights, integrated by Monte Carlo: area lights (square, rectangle, disk,
+      ellipse), emissive meshes (seed 3.3.3, 7.1.3), suns with an angular diameter, and a
+      constant world.
+    Each sampled light gives, for points x with normals n and uniform numbers u, a direction,
+    a distance for the shadow ray and the irradiance estimate L cos(theta_x) / pdf(omega) before
+    visibility, plus a cheap unoccluded estimate of its contribution used to share the samples
+    among lights (``selection_weights``).
+
+Sampling
+    Triangles (emissive meshes with up to ``SOLID_ANGLE_MAX_TRIANGLES`` triangles, and
+    rectangles as two triangles) are sampled by solid angle: a triangle is chosen in proportion
+    to the solid angle it subtends (Van Oosterom and Strackee 1983) and a direction is drawn
+    uniformly inside its spherical triangle (Arvo 1995, "Stratified sampling of spherical
+    triangles"), so the estimate is L cos(theta_x) Omega_total. Triangles subtending less than
+    ``SOLID_ANGLE_MIN`` sr are sampled by area instead (Arvo's map loses precision there).
+    Larger meshes choose a triangle by area with ``searchsorted`` on cumulative areas (the
+    seed's "area line") and an area-uniform point (DESIGN.md §4). Disks and ellipses are
+    sampled by area through the concentric map. Suns with an angle sample their cone
+    uniformly; the world is sampled with cosine-distributed directions (E = pi L V).
+
+Units: see ``engine/scene.py``. Radiance in W m^-2 sr^-1, irradiance in W m^-2.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from . import sampling
+from .scene import AreaLight, PointLight, Scene, SpotLight, SunLight
+
+SOLID_ANGLE_MAX_TRIANGLES = 64
+SOLID_ANGLE_MIN = 1e-4
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+
+def _dot(a, b):
+    return np.einsum("ij,ij->i", a, b)
+
+
+def _normalize(v):
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.where(n > 0, n, 1.0)
+
+
+def spot_mask(cos_axis: np.ndarray, cos_half: float, blend: float) -> np.ndarray:
+    """Blender/Cycles spot cone: 0 outside, smoothstep over the outer ``blend`` share of
+    (1 - cos_half), 1 inside."""
+    smooth = (1.0 - cos_half) * blend
+    t = cos_axis - cos_half
+    if smooth <= 0:
+        return (t > 0).astype(np.float64)
+    x = np.clip(t / smooth, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+# Spherical triangles -----------------------------------------------------------------------
+def solid_angle(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Solid angle of spherical triangles with unit corner directions a, b, c (..., 3)."""
+    triple = np.abs(np.einsum("...i,...i->...", a, np.cross(b, c)))
+    denom = 1.0 + np.einsum("...i,...i->...", a, b) + np.einsum("...i,...i->...", b, c) \
+        + np.einsum("...i,...i->...", c, a)
+    return 2.0 * np.arctan2(triple, denom)
+
+
+def sample_spherical_triangle(a: np.ndarray, b: np.ndarray, c: np.ndarray,
+                              u: np.ndarray) -> np.ndarray:
+    """Arvo's uniform sampling of spherical triangles (a, b, c unit (N, 3), u (N, 2))."""
+    def plane_angle(p, q, r):
+        n1 = _normalize(np.cross(p, q))
+        n2 = _normalize(np.cross(p, r))
+        return np.arccos(np.clip(_dot(n1, n2), -1.0, 1.0))
+
+    alpha = plane_angle(a, b, c)
+    beta = plane_angle(b, c, a)
+    gamma = plane_angle(c, a, b)
+    area = np.maximum(alpha + beta + gamma - np.pi, 0.0)
+    area_hat = u[:, 0] * area
+    s = np.sin(area_hat - alpha)
+    t = np.cos(area_hat - alpha)
+    cos_alpha, sin_alpha = np.cos(alpha), np.sin(alpha)
+    cos_c = _dot(a, b)
+    uu = t - cos_alpha
+    vv = s + sin_alpha * cos_c
+    denom = (vv * s + uu * t) * sin_alpha
+    q = np.where(np.abs(denom) > 1e-300, ((vv * t - uu * s) * cos_alpha - vv) / np.where(denom == 0, 1, denom), 1.0)
+    q = np.clip(q, -1.0, 1.0)
+    c_perp = _normalize(c - _dot(c, a)[:, None] * a)
+    c_hat = q[:, None] * a + np.sqrt(np.maximum(0.0, 1.0 - q * q))[:, None] * c_perp
+    z = 1.0 - u[:, 1] * (1.0 - _dot(c_hat, b))
+    ch_perp = _normalize(c_hat - _dot(c_hat, b)[:, None] * b)
+    return z[:, None] * b + np.sqrt(np.maximum(0.0, 1.0 - z * z))[:, None] * ch_perp
+
+
+# Sampled lights -----------------------------------------------------------------------------
+class TriangleEmitter:
+    """Emitting triangles of one object (or a rectangle light): per-triangle RGB radiance."""
+
+    kind = "mesh"
+
+    def __init__(self, name: str, triangles: np.ndarray, radiance: np.ndarray, two_sided: bool):
+        self.name = name
+        self.tris = np.asarray(triangles, np.float64).reshape(-1, 3, 3)
+        self.radiance = np.broadcast_to(np.asarray(radiance, np.float64), (len(self.tris), 3)).copy()
+        self.two_sided = two_sided
+        e1 = self.tris[:, 1] - self.tris[:, 0]
+        e2 = self.tris[:, 2] - self.tris[:, 0]
+        cross = np.cross(e1, e2)
+        self.areas = 0.5 * np.linalg.norm(cross, axis=1)
+        self.normals = _normalize(cross)
+        self.total_area = float(self.areas.sum())
+        power_weight = self.areas * (self.radiance @ LUMINANCE + 1e-30)
+        self.cdf = np.cumsum(power_weight) / power_weight.sum()
+        self.use_solid_angle = len(self.tris) <= SOLID_ANGLE_MAX_TRIANGLES
+        self.centroid = (self.tris.mean(axis=1) * self.areas[:, None]).sum(0) / self.total_area
+        self.mean_radiance = (self.radiance * self.areas[:, None]).sum(0) / self.total_area
+        self.power = np.pi * self.mean_radiance * self.total_area * (2 if two_sided else 1)
+
+    def _facing(self, x, tri_index, direction_to_light):
+        """1 where the emitter's lit side faces x along ``direction_to_light``."""
+        if self.two_sided:
+            return np.ones(len(x))
+        return (_dot(self.normals[tri_index], direction_to_light) < 0).astype(np.float64)
+
+    def selection_weight(self, x, n):
+        d = self.centroid - x
+        r2 = np.maximum(_dot(d, d), 1e-300)
+        r = np.sqrt(r2)
+        cos_x = np.maximum(_dot(n, d) / r, 0.0)
+        omega = np.minimum(self.total_area / r2, 2 * np.pi)
+        return (self.mean_radiance @ LUMINANCE) * omega * (0.25 + cos_x)
+
+    def sample(self, x, n, u):
+        """Directions, shadow distances and irradiance estimates L cos(theta_x) / pdf."""
+        count = len(x)
+        if self.use_solid_angle:
+            a = self.tris[None, :, 0] - x[:, None]
+            b = self.tris[None, :, 1] - x[:, None]
+            c = self.tris[None, :, 2] - x[:, None]
+            omega = solid_angle(_normalize(a), _normalize(b), _normalize(c))  # (N, T)
+            # Triangles seen from behind (one-sided) or edge-on give nothing: skip them.
+            if not self.two_sided:
+                side = np.einsum("ntk,tk->nt", a, self.normals)
+                omega = np.where(side < 0, omega, 0.0)
+            total = omega.sum(axis=1)
+            cdf = np.cumsum(omega, axis=1)
+            pick_u = u[:, 0] * total
+            tri = np.minimum((cdf < pick_u[:, None]).sum(axis=1), len(self.tris) - 1)
+            # Re-use the selection number inside the chosen triangle's share.
+            lower = np.where(tri > 0, cdf[np.arange(count), np.maximum(tri - 1, 0)], 0.0)
+            chosen = omega[np.arange(count), tri]
+            u0 = np.clip((pick_u - lower) / np.where(chosen > 0, chosen, 1.0), 0.0, 1.0 - 1e-12)
+            tri_pts = self.tris[tri]
+            big = chosen > SOLID_ANGLE_MIN
+            direction = np.zeros((count, 3))
+            dist = np.zeros(count)
+            pdf_w = np.zeros(count)
+            if np.any(big):
+                ab = _normalize(tri_pts[big, 0] - x[big])
+                bb = _normalize(tri_pts[big, 1] - x[big])
+                cb = _normalize(tri_pts[big, 2] - x[big])
+                w = sample_spherical_triangle(ab, bb, cb, np.stack([u0[big], u[big, 1]], 1))
+                w = _normalize(w)
+                # Distance to the triangle's plane along w.
+                nrm = self.normals[tri[big]]
+                denom = _dot(w, nrm)
+                dist_b = _dot(tri_pts[big, 0] - x[big], nrm) / np.where(np.abs(denom) > 1e-300, denom, 1e-300)
+                direction[big] = w
+                dist[big] = dist_b
+                pdf_w[big] = 1.0 / total[big]
+            small = ~big & (chosen > 0)
+            if np.any(small):
+                bary = sampling.square_to_triangle(np.stack([u0[small], u[small, 1]], 1))
+                tp = tri_pts[small]
+                p = tp[:, 0] * (1 - bary[:, 0:1] - bary[:, 1:2]) + tp[:, 1] * bary[:, 0:1] + tp[:, 2] * bary[:, 1:2]
+                d = p - x[small]
+                r2 = np.maximum(_dot(d, d), 1e-300)
+                r = np.sqrt(r2)
+                w = d / r[:, None]
+                cos_l = np.abs(_dot(w, self.normals[tri[small]]))
+                pdf_area_to_w = r2 / np.maximum(cos_l * self.areas[tri[small]], 1e-300)
+                direction[small] = w
+                dist[small] = r
+                pdf_w[small] = (chosen[small] / total[small]) * pdf_area_to_w
+            valid = (total > 0) & (pdf_w > 0) & np.isfinite(dist) & (dist > 0)
+        else:
+            tri = np.minimum(np.searchsorted(self.cdf, u[:, 0] * self.cdf[-1], side="right"),
+                             len(self.tris) - 1)
+            lower = np.where(tri > 0, self.cdf[np.maximum(tri - 1, 0)], 0.0)
+            share = self.cdf[tri] - lower
+            u0 = np.clip((u[:, 0] - lower) / np.where(share > 0, share, 1.0), 0.0, 1.0 - 1e-12)
+            bary = sampling.square_to_triangle(np.stack([u0, u[:, 1]], 1))
+            tp = self.tris[tri]
+            p = tp[:, 0] * (1 - bary[:, 0:1] - bary[:, 1:2]) + tp[:, 1] * bary[:, 0:1] + tp[:, 2] * bary[:, 1:2]
+            d = p - x
+            r2 = np.maximum(_dot(d, d), 1e-300)
+            dist = np.sqrt(r2)
+            direction = d / dist[:, None]
+            cos_l = np.abs(_dot(direction, self.normals[tri]))
+            pdf_w = share * r2 / np.maximum(cos_l * self.areas[tri], 1e-300)
+            valid = cos_l > 0
+        cos_x = np.maximum(_dot(n, direction), 0.0)
+        facing = self._facing(x, tri, direction)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            weight = np.where(valid, cos_x * facing / np.where(pdf_w > 0, pdf_w, 1.0), 0.0)
+        estimate = self.radiance[tri] * weight[:, None]
+        return direction, np.where(valid, dist, 0.0), estimate
+
+
+def area_light_triangles(light: AreaLight) -> np.ndarray:
+    """A rectangle light as two triangles wound so that their normal is the emission side."""
+    c, du, dv = light.center, light.axis_u, light.axis_v
+    p00, p10, p11, p01 = c - du - dv, c + du - dv, c + du + dv, c - du + dv
+    tris = np.array([[p00, p11, p10], [p00, p01, p11]])
+    # Winding (p00, p11, p10) has normal -(du x dv), the emission side (local -Z).
+    return tris
+
+
+class EllipseEmitter:
+    """Disk and ellipse area lights, one-sided: sampled by area (concentric map) from afar, and
+    as a fan of triangles by solid angle from close by."""
+
+    kind = "area"
+
+    def __init__(self, light: AreaLight):
+        self.name = light.name
+        self.center = light.center
+        self.du, self.dv = light.axis_u, light.axis_v
+        self.normal = light.normal
+        self.area = light.area
+        self.radiance = light.radiance
+        self.power = light.power
+        # Close to the light, area sampling is noisy (the 1/r^2 peak): there the light is a fan
+        # of FAN_SEGMENTS triangles, scaled to the same area, sampled by solid angle.
+        k = self.FAN_SEGMENTS
+        phi = 2 * np.pi * np.arange(k + 1) / k
+        grow = np.sqrt(np.pi / (0.5 * k * np.sin(2 * np.pi / k)))
+        rim = self.center + grow * (np.cos(phi)[:, None] * self.du + np.sin(phi)[:, None] * self.dv)
+        # Wound so that the triangles' normal is the emission side (-(du x dv)).
+        fan = np.stack([np.broadcast_to(self.center, (k, 3)), rim[1:], rim[:-1]], axis=1)
+        self.fan = TriangleEmitter(light.name, fan, self.radiance, two_sided=False)
+        self.near_distance = 3.0 * max(np.linalg.norm(self.du), np.linalg.norm(self.dv))
+
+    FAN_SEGMENTS = 64
+
+    def sample(self, x, n, u):
+        near = np.linalg.norm(x - self.center, axis=1) < self.near_distance
+        if not np.any(near):
+            return self._sample_area(x, n, u)
+        if np.all(near):
+            return self.fan.sample(x, n, u)
+        w = np.zeros((len(x), 3)); dist = np.zeros(len(x)); e = np.zeros((len(x), 3))
+        for mask, fn in ((near, self.fan.sample), (~near, self._sample_area)):
+            w[mask], dist[mask], e[mask] = fn(x[mask], n[mask], u[mask])
+        return w, dist, e
+
+    def selection_weight(self, x, n):
+        d = self.center - x
+        r2 = np.maximum(_dot(d, d), 1e-300)
+        r = np.sqrt(r2)
+        cos_x = np.maximum(_dot(n, d) / r, 0.0)
+        cos_l = np.maximum(-_dot(d, self.normal[None]) / r, 0.0)
+        omega = np.minimum(self.area * (0.1 + cos_l) / r2, 2 * np.pi)
+        return (self.radiance @ LUMINANCE) * omega * (0.25 + cos_x)
+
+    def _sample_area(self, x, n, u):
+        disk = sampling.square_to_disk(u)
+        p = self.center + disk[:, 0:1] * self.du + disk[:, 1:2] * self.dv
+        d = p - x
+        r2 = np.maximum(_dot(d, d), 1e-300)
+        dist = np.sqrt(r2)
+        w = d / dist[:, None]
+        cos_l = np.maximum(-_dot(w, self.normal[None]), 0.0)   # lit side only
+        cos_x = np.maximum(_dot(n, w), 0.0)
+        weight = cos_x * cos_l * self.area / r2
+        return w, dist, self.radiance[None] * weight[:, None]
+
+
+class SunCone:
+    """A sun with an angular diameter: uniform directions in its cone."""
+
+    kind = "sun"
+
+    def __init__(self, light: SunLight):
+        self.name = light.name
+        self.to_light = -light.direction
+        self.irradiance = light.irradiance
+        self.cos_max = np.cos(0.5 * light.angle)
+        t, b = sampling.orthonormal_basis(self.to_light[None])
+        self.frame = (t[0], b[0])
+
+    def selection_weight(self, x, n):
+        return (self.irradiance @ LUMINANCE) * (0.1 + np.maximum(n @ self.to_light, 0.0))
+
+    def sample(self, x, n, u):
+        local = sampling.square_to_cone(u, self.cos_max)
+        t, b = self.frame
+        w = local[:, 0:1] * t + local[:, 1:2] * b + local[:, 2:3] * self.to_light
+        cos_x = np.maximum(_dot(n, w), 0.0)
+        return w, np.full(len(x), np.inf), self.irradiance[None] * cos_x[:, None]
+
+
+class WorldLight:
+    """A constant environment: cosine-distributed directions, estimate pi L."""
+
+    kind = "world"
+    name = "World"
+
+    def __init__(self, radiance):
+        self.radiance = np.asarray(radiance, np.float64)
+
+    def selection_weight(self, x, n):
+        return np.full(len(x), np.pi * (self.radiance @ LUMINANCE))
+
+    def sample(self, x, n, u):
+        t, b = sampling.orthonormal_basis(n)
+        w = sampling.to_world(sampling.square_to_cosine_hemisphere(u), t, b, n)
+        return w, np.full(len(x), np.inf), np.broadcast_to(np.pi * self.radiance, (len(x), 3)).copy()
+
+
+# The light set ------------------------------------------------------------------------------
+class LightSet:
+    """All lights of a scene, split into exactly evaluated (delta) and sampled lights."""
+
+    def __init__(self, scene: Scene):
+        self.points_pos, self.points_intensity, self.point_names = [], [], []
+        self.spots = []            # (position, axis, intensity, cos_half, blend, name)
+        self.suns = []             # (to_light, irradiance, name)
+        self.collimated = []       # AreaLight with collimated=True
+        self.sampled = []
+        for light in scene.lights:
+            if isinstance(light, PointLight):
+                self.points_pos.append(light.position)
+                self.points_intensity.append(light.flux / (4 * np.pi))
+                self.point_names.append(light.name)
+            elif isinstance(light, SpotLight):
+                self.spots.append((light.position, light.direction, light.flux / (4 * np.pi),
+                                   float(np.cos(light.half_angle)), light.blend, light.name))
+            elif isinstance(light, SunLight):
+                if light.angle > 1e-6:
+                    self.sampled.append(SunCone(light))
+                else:
+                    self.suns.append((-light.direction, light.irradiance, light.name))
+            elif isinstance(light, AreaLight):
+                if light.collimated:
+                    self.collimated.append(light)
+                elif light.shape in ("SQUARE", "RECTANGLE"):
+                    self.sampled.append(TriangleEmitter(light.name, area_light_triangles(light),
+                                                        light.radiance, two_sided=False))
+                else:
+                    self.sampled.append(EllipseEmitter(light))
+        self.points_pos = np.array(self.points_pos, np.float64).reshape(-1, 3)
+        self.points_intensity = np.array(self.points_intensity, np.float64).reshape(-1, 3)
+
+        # Emissive meshes: one emitter per object, from triangles whose material emits.
+        table = scene.material_table()
+        if len(scene.triangles):
+            emissive = np.any(table["exitance"][scene.material_ids] > 0, axis=1)
+            self.emissive_triangles = emissive
+            if np.any(emissive):
+                idx = np.nonzero(emissive)[0]
+                keys = scene.object_ids[idx].astype(np.int64) * 65536 + scene.material_ids[idx]
+                for key in np.unique(keys):
+                    sel = idx[keys == key]
+                    oid, mid = int(key // 65536), int(key % 65536)
+                    name = scene.object_names[oid] if oid < len(scene.object_names) else "Mesh"
+                    self.sampled.append(TriangleEmitter(
+                        name, scene.triangles[sel], table["exitance"][mid].astype(np.float64) / np.pi,
+                        two_sided=bool(table["both_sides"][mid])))
+        else:
+            self.emissive_triangles = np.zeros(0, bool)
+        if not scene.world.is_black:
+            self.sampled.append(WorldLight(scene.world.radiance))
+
+    @property
+    def delta_count(self) -> int:
+        return len(self.points_pos) + len(self.spots) + len(self.suns) + len(self.collimated)
+
+    @property
+    def empty(self) -> bool:
+        return self.delta_count == 0 and not self.sampled
+
+    def selection_weights(self, x, n) -> np.ndarray:
+        """(N, L) probabilities of choosing each sampled light, from unoccluded estimates.
+
+        A floor keeps every light's probability positive, so the estimate stays unbiased where
+        the cheap estimate is wrong (a large light seen close up, say)."""
+        w = np.stack([light.selection_weight(x, n) for light in self.sampled], axis=1)
+        w = np.where(np.isfinite(w), np.maximum(w, 0.0), 0.0)
+        w += 0.02 * w.mean(axis=1, keepdims=True) + 1e-30
+        return w / w.sum(axis=1, keepdims=True)
+
+    def delta_rays(self, x, n):
+        """For each delta light: (direction (N,3), distance (N,), irradiance before visibility
+        (N,3)). Generator, so that callers can batch the shadow rays."""
+        for pos, intensity in zip(self.points_pos, self.points_intensity):
+            d = pos - x
+            r2 = np.maximum(_dot(d, d), 1e-300)
+            r = np.sqrt(r2)
+            w = d / r[:, None]
+            cos_x = np.maximum(_dot(n, w), 0.0)
+            yield w, r, intensity[None] * (cos_x / r2)[:, None]
+        for pos, axis, intensity, cos_half, blend, _name in self.spots:
+            d = pos - x
+            r2 = np.maximum(_dot(d, d), 1e-300)
+            r = np.sqrt(r2)
+            w = d / r[:, None]
+            cos_x = np.maximum(_dot(n, w), 0.0)
+            mask = spot_mask(-(w @ axis), cos_half, blend)
+            yield w, r, intensity[None] * (cos_x * mask / r2)[:, None]
+        for to_light, irradiance, _name in self.suns:
+            cos_x = np.maximum(n @ to_light, 0.0)
+            yield np.broadcast_to(to_light, x.shape).copy(), np.full(len(x), np.inf), irradiance[None] * cos_x[:, None]
+        for light in self.collimated:
+            yield self._collimated(light, x, n)
+
+    @staticmethod
+    def _collimated(light: AreaLight, x, n):
+        """Seed Eq. 7.2: inside the beam E = (P / A) cos(theta), along -normal_light."""
+        nl = light.normal
+        to_light = -nl
+        rel = x - light.center
+        height = rel @ nl                            # distance to the plane, > 0 in the beam
+        # Position within the light, in units of its half axes.
+        du, dv = light.axis_u, light.axis_v
+        su = rel @ du / (du @ du)
+        sv = rel @ dv / (dv @ dv)
+        if light.shape in ("DISK", "ELLIPSE"):
+            inside = su * su + sv * sv <= 1.0
+        else:
+            inside = (np.abs(su) <= 1.0) & (np.abs(sv) <= 1.0)
+        ok = inside & (height > 0)
+        cos_x = np.maximum(n @ to_light, 0.0)
+        e = (light.power / light.area)[None] * (cos_x * ok)[:, None]
+        return np.broadcast_to(to_light, x.shape).copy(), np.where(ok, height, 0.0), e
+
+    def describe(self) -> dict:
+        return {
+            "point": len(self.points_pos), "spot": len(self.spots), "sun": len(self.suns),
+            "collimated_area": len(self.collimated),
+            "sampled": [f"{getattr(s, 'kind', '?')}:{s.name}" for s in self.sampled],
+        }
