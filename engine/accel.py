@@ -93,10 +93,8 @@ class Accelerator:
         def run(a, b):
             dists = np.full(b - a, 1e37, np.float32) if far is None else np.array(far[a:b], np.float32)
             out = self._embree.run(org[a:b], dirs[a:b], dists, output=1)
-            p = out["primID"]
-            hit = p >= 0
-            prim[a:b] = p
-            t[a:b] = np.where(hit, out["tfar"], np.inf)
+            prim[a:b] = out["primID"]
+            t[a:b] = out["tfar"]
             u[a:b] = out["u"]
             v[a:b] = out["v"]
 
@@ -130,14 +128,19 @@ class Accelerator:
     # Geometry helpers -----------------------------------------------------------------------
     def offset_distance(self, points: np.ndarray) -> np.ndarray:
         """Self-intersection offset [m] for each point (N,): relative to |p| and the extent."""
-        mag = np.max(np.abs(points), axis=1)
-        return OFFSET_SCALE * np.maximum(mag, 1e-2 * self.extent)
+        a = np.abs(points)
+        mag = np.maximum(a[:, 0], a[:, 1])
+        np.maximum(mag, a[:, 2], out=mag)
+        np.maximum(mag, 1e-2 * self.extent, out=mag)
+        mag *= OFFSET_SCALE
+        return mag
 
     def offset_origins(self, points: np.ndarray, normals: np.ndarray,
                        directions: np.ndarray) -> np.ndarray:
         """Push points off their surface along the normal, on the side ``directions`` leave."""
-        side = np.where(np.einsum("ij,ij->i", normals, directions) >= 0, 1.0, -1.0)
-        return points + normals * (side * self.offset_distance(points))[:, None]
+        eps = self.offset_distance(points)
+        eps = np.where(np.einsum("ij,ij->i", normals, directions) >= 0, eps, -eps)
+        return points + normals * eps[:, None].astype(points.dtype, copy=False)
 
     def hit_points(self, prim: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """World positions of hits from barycentrics (float64), for prim >= 0."""

@@ -28,7 +28,7 @@ def pixel_rays(camera, pixel_start: int, pixel_stop: int, samples: int, rng: np.
                filter_width: float = 1.5):
     """Rays for window pixels [pixel_start, pixel_stop) in row-major order, top row first.
 
-    Returns (origins (P*S, 3) float64, directions (P*S, 3) float64 unit, tmax (P*S,)),
+    Returns (origins (P*S, 3) float32, directions (P*S, 3) float32 unit, tmax (P*S,)),
     samples of one pixel contiguous.
     """
     x0, y0, x1, y1 = camera.border
@@ -38,19 +38,24 @@ def pixel_rays(camera, pixel_start: int, pixel_stop: int, samples: int, rng: np.
     row, col = np.divmod(pix, win_w)
     px = x0 + col                                   # full-frame column
     py = y0 + (win_h - 1 - row)                     # full-frame row from the bottom
-    u = sampling.stratified_2d(len(pix), samples, rng)          # (P, S, 2)
+    # Stratified positions: every pixel visits each of its strata once (the order of the
+    # strata carries no information, so no per-pixel shuffle is needed).
+    u = sampling.stratified_2d(len(pix), samples, rng, shuffle=False)          # (P, S, 2)
     off = sampling.filter_offsets(u, filter_width)
-    sx = (px[:, None] + 0.5 + off[..., 0]) / full_w * 2.0 - 1.0
-    sy = (py[:, None] + 0.5 + off[..., 1]) / full_h * 2.0 - 1.0
-    local = np.empty((sx.size, 3))
-    local[:, 0] = sx.reshape(-1) * camera.tan_half_x + camera.shift_x
-    local[:, 1] = sy.reshape(-1) * camera.tan_half_y + camera.shift_y
+    count = len(pix) * samples
+    local = np.empty((count, 3), np.float32)
+    scale_x = np.float32(2.0 * camera.tan_half_x / full_w)
+    scale_y = np.float32(2.0 * camera.tan_half_y / full_h)
+    local[:, 0] = ((px[:, None] + 0.5 + off[..., 0]) * scale_x).reshape(-1)
+    local[:, 0] += np.float32(camera.shift_x - camera.tan_half_x)
+    local[:, 1] = ((py[:, None] + 0.5 + off[..., 1]) * scale_y).reshape(-1)
+    local[:, 1] += np.float32(camera.shift_y - camera.tan_half_y)
     local[:, 2] = -1.0
     m = camera.matrix
-    rotation = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0)  # ignore the camera's scale
-    world = local @ rotation.T                     # z = -1 plane, not yet unit
-    length = np.linalg.norm(world, axis=1)
-    origins = m[:3, 3] + world * camera.clip_start  # on the near plane (camera-space z = -clip_start)
+    rotation = (m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0)).astype(np.float32)  # no scale
+    world = local @ rotation.T                      # on the plane z = -1, not yet unit
+    length = np.sqrt(np.einsum("ij,ij->i", world, world))
+    origins = m[:3, 3].astype(np.float32) + world * np.float32(camera.clip_start)  # near plane
     directions = world / length[:, None]
-    tmax = (camera.clip_end - camera.clip_start) * length
+    tmax = np.float32(camera.clip_end - camera.clip_start) * length
     return origins, directions, tmax

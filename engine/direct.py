@@ -43,16 +43,17 @@ def direct_irradiance(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng
     if count == 0 or lights.empty:
         return irradiance
 
-    origins, directions, distances, contributions, targets = [], [], [], [], []
+    # Each entry: (target points, directions, distances, scalar weights, rgb of the light).
+    groups = []
 
-    # Delta lights: one ray per light and point.
-    for w, dist, e in lights.delta_rays(x, n):
-        live = np.any(e > 0, axis=1)
-        if not np.any(live):
-            continue
-        idx = np.nonzero(live)[0]
-        origins.append(x[idx]); directions.append(w[idx]); distances.append(dist[idx])
-        contributions.append(e[idx]); targets.append(idx)
+    # Delta lights: one ray per light and lit point.
+    for w, dist, weight, rgb in lights.delta_rays(x, n):
+        live = weight > 0
+        if live.all():
+            groups.append((None, w, dist, weight, rgb))
+        elif live.any():
+            idx = np.nonzero(live)[0]
+            groups.append((idx, w[idx], dist[idx], weight[idx], rgb))
 
     # Sampled lights: K stratified samples per point, light chosen by estimated contribution.
     if lights.sampled and light_samples > 0:
@@ -71,40 +72,53 @@ def direct_irradiance(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng
             if len(sel) == 0:
                 continue
             pts = point_of[sel]
-            w, dist, e = light.sample(x[pts], n[pts], u2[sel])
-            e = e / (p_sel[sel] * k)[:, None]
-            live = np.any(e > 0, axis=1) & np.isfinite(e).all(axis=1)
-            if not np.any(live):
-                continue
-            origins.append(x[pts[live]]); directions.append(w[live]); distances.append(dist[live])
-            contributions.append(e[live]); targets.append(pts[live])
+            w, dist, weight = light.sample(x[pts], n[pts], u2[sel])
+            weight = weight / (p_sel[sel] * k)
+            live = (weight > 0) & np.isfinite(weight)
+            if live.any():
+                groups.append((pts[live], w[live], dist[live], weight[live], light.rgb))
 
-    if not origins:
+    if not groups:
         return irradiance
-    org = np.concatenate(origins)
-    dirs = np.concatenate(directions)
-    dist = np.concatenate(distances)
-    contrib = np.concatenate(contributions)
+    everyone = np.arange(count)
+    targets = [everyone if g[0] is None else g[0] for g in groups]
     target = np.concatenate(targets)
-    start = accel.offset_origins(org, (n if offset_normals is None else offset_normals)[target], dirs)
+    dirs = np.concatenate([g[1] for g in groups]).astype(x.dtype, copy=False)
+    dist = np.concatenate([g[2] for g in groups])
+    org = x[target] if len(groups) > 1 or groups[0][0] is not None else x
+    normals = n if offset_normals is None else offset_normals
+    start = accel.offset_origins(org, normals[target] if org is not x else normals, dirs)
     # Aim from the offset origin at the sampled light point itself and stop short of it by
     # its own offset, so that neither the receiver nor the emitter shadows the ray.
     finite = np.isfinite(dist)
-    light_point = org[finite] + dist[finite, None] * dirs[finite]
-    towards = light_point - start[finite]
-    length = np.linalg.norm(towards, axis=1)
-    dirs[finite] = towards / np.maximum(length, 1e-300)[:, None]
-    far = np.full(len(org), 1e37)
-    far[finite] = np.maximum(length - 2.0 * accel.offset_distance(light_point), 0.0)
+    far = np.full(len(org), 1e37, np.float32)
+    if finite.all():
+        light_point = org + dist[:, None].astype(org.dtype) * dirs
+        towards = light_point - start
+        length = np.sqrt(np.einsum("ij,ij->i", towards, towards))
+        dirs = towards / np.maximum(length, 1e-30)[:, None]
+        far[:] = np.maximum(length - 2.0 * accel.offset_distance(light_point), 0.0)
+    elif finite.any():
+        light_point = org[finite] + dist[finite, None] * dirs[finite]
+        towards = light_point - start[finite]
+        length = np.sqrt(np.einsum("ij,ij->i", towards, towards))
+        dirs[finite] = towards / np.maximum(length, 1e-30)[:, None]
+        far[finite] = np.maximum(length - 2.0 * accel.offset_distance(light_point), 0.0)
     if ray_log is not None:
         ray_log.append(("shadow", start, dirs, far))
     t0 = time.perf_counter()
     blocked = accel.occluded(start, dirs, far)
     traced = time.perf_counter() - t0
-    visible = ~blocked & (far > 0)
-    for channel in range(3):
-        irradiance[:, channel] = np.bincount(target[visible], weights=contrib[visible, channel],
-                                             minlength=count)
+
+    # Accumulate weight x rgb per light group for the rays that got through.
+    offset = 0
+    for tgt, group in zip(targets, groups):
+        size = len(tgt)
+        weight = np.where(blocked[offset:offset + size] | (far[offset:offset + size] <= 0), 0.0,
+                          group[3])
+        offset += size
+        scalar = weight if group[0] is None else np.bincount(tgt, weights=weight, minlength=count)
+        irradiance += scalar[:, None] * np.asarray(group[4], np.float64)[None]
     if stats is not None:
         stats["shadow_rays"] = stats.get("shadow_rays", 0) + len(org)
         stats["trace_seconds"] = stats.get("trace_seconds", 0.0) + traced

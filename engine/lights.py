@@ -10,8 +10,8 @@ What it computes
       ellipse), emissive meshes (seed 3.3.3, 7.1.3), suns with an angular diameter, and a
       constant world.
     Each sampled light gives, for points x with normals n and uniform numbers u, a direction,
-    a distance for the shadow ray and the irradiance estimate L cos(theta_x) / pdf(omega) before
-    visibility, plus a cheap unoccluded estimate of its contribution used to share the samples
+    a distance for the shadow ray and a scalar weight: the irradiance estimate before visibility
+    is ``weight * light.rgb`` (L cos(theta_x) / pdf(omega) for emitters); plus a cheap unoccluded estimate of its contribution used to share the samples
     among lights (``selection_weights``).
 
 Sampling
@@ -47,6 +47,15 @@ def _dot(a, b):
 def _normalize(v):
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     return v / np.where(n > 0, n, 1.0)
+
+
+def _towards(pos, x):
+    """Unit directions from points x to ``pos``, distances and 1/r^2 (column-wise, fast)."""
+    d = pos.astype(x.dtype) - x
+    r2 = np.einsum("ij,ij->i", d, d)
+    np.maximum(r2, 1e-30, out=r2)
+    r = np.sqrt(r2)
+    return d / r[:, None], r, 1.0 / r2
 
 
 def spot_mask(cos_axis: np.ndarray, cos_half: float, blend: float) -> np.ndarray:
@@ -107,7 +116,7 @@ class TriangleEmitter:
     def __init__(self, name: str, triangles: np.ndarray, radiance: np.ndarray, two_sided: bool):
         self.name = name
         self.tris = np.asarray(triangles, np.float64).reshape(-1, 3, 3)
-        self.radiance = np.broadcast_to(np.asarray(radiance, np.float64), (len(self.tris), 3)).copy()
+        self.rgb = np.asarray(radiance, np.float64).reshape(3)   # one radiance per emitter
         self.two_sided = two_sided
         e1 = self.tris[:, 1] - self.tris[:, 0]
         e2 = self.tris[:, 2] - self.tris[:, 0]
@@ -115,12 +124,10 @@ class TriangleEmitter:
         self.areas = 0.5 * np.linalg.norm(cross, axis=1)
         self.normals = _normalize(cross)
         self.total_area = float(self.areas.sum())
-        power_weight = self.areas * (self.radiance @ LUMINANCE + 1e-30)
-        self.cdf = np.cumsum(power_weight) / power_weight.sum()
+        self.cdf = np.cumsum(self.areas) / self.areas.sum()
         self.use_solid_angle = len(self.tris) <= SOLID_ANGLE_MAX_TRIANGLES
         self.centroid = (self.tris.mean(axis=1) * self.areas[:, None]).sum(0) / self.total_area
-        self.mean_radiance = (self.radiance * self.areas[:, None]).sum(0) / self.total_area
-        self.power = np.pi * self.mean_radiance * self.total_area * (2 if two_sided else 1)
+        self.power = np.pi * self.rgb * self.total_area * (2 if two_sided else 1)
 
     def _facing(self, x, tri_index, direction_to_light):
         """1 where the emitter's lit side faces x along ``direction_to_light``."""
@@ -134,7 +141,7 @@ class TriangleEmitter:
         r = np.sqrt(r2)
         cos_x = np.maximum(_dot(n, d) / r, 0.0)
         omega = np.minimum(self.total_area / r2, 2 * np.pi)
-        return (self.mean_radiance @ LUMINANCE) * omega * (0.25 + cos_x)
+        return (self.rgb @ LUMINANCE) * omega * (0.25 + cos_x)
 
     def sample(self, x, n, u):
         """Directions, shadow distances and irradiance estimates L cos(theta_x) / pdf."""
@@ -209,8 +216,7 @@ class TriangleEmitter:
         facing = self._facing(x, tri, direction)
         with np.errstate(divide="ignore", invalid="ignore"):
             weight = np.where(valid, cos_x * facing / np.where(pdf_w > 0, pdf_w, 1.0), 0.0)
-        estimate = self.radiance[tri] * weight[:, None]
-        return direction, np.where(valid, dist, 0.0), estimate
+        return direction, np.where(valid, dist, 0.0), weight
 
 
 def area_light_triangles(light: AreaLight) -> np.ndarray:
@@ -234,7 +240,7 @@ class EllipseEmitter:
         self.du, self.dv = light.axis_u, light.axis_v
         self.normal = light.normal
         self.area = light.area
-        self.radiance = light.radiance
+        self.rgb = light.radiance
         self.power = light.power
         # Close to the light, area sampling is noisy (the 1/r^2 peak): there the light is a fan
         # of FAN_SEGMENTS triangles, scaled to the same area, sampled by solid angle.
@@ -244,7 +250,7 @@ class EllipseEmitter:
         rim = self.center + grow * (np.cos(phi)[:, None] * self.du + np.sin(phi)[:, None] * self.dv)
         # Wound so that the triangles' normal is the emission side (-(du x dv)).
         fan = np.stack([np.broadcast_to(self.center, (k, 3)), rim[1:], rim[:-1]], axis=1)
-        self.fan = TriangleEmitter(light.name, fan, self.radiance, two_sided=False)
+        self.fan = TriangleEmitter(light.name, fan, self.rgb, two_sided=False)
         self.near_distance = 3.0 * max(np.linalg.norm(self.du), np.linalg.norm(self.dv))
 
     FAN_SEGMENTS = 64
@@ -255,7 +261,7 @@ class EllipseEmitter:
             return self._sample_area(x, n, u)
         if np.all(near):
             return self.fan.sample(x, n, u)
-        w = np.zeros((len(x), 3)); dist = np.zeros(len(x)); e = np.zeros((len(x), 3))
+        w = np.zeros((len(x), 3)); dist = np.zeros(len(x)); e = np.zeros(len(x))
         for mask, fn in ((near, self.fan.sample), (~near, self._sample_area)):
             w[mask], dist[mask], e[mask] = fn(x[mask], n[mask], u[mask])
         return w, dist, e
@@ -267,7 +273,7 @@ class EllipseEmitter:
         cos_x = np.maximum(_dot(n, d) / r, 0.0)
         cos_l = np.maximum(-_dot(d, self.normal[None]) / r, 0.0)
         omega = np.minimum(self.area * (0.1 + cos_l) / r2, 2 * np.pi)
-        return (self.radiance @ LUMINANCE) * omega * (0.25 + cos_x)
+        return (self.rgb @ LUMINANCE) * omega * (0.25 + cos_x)
 
     def _sample_area(self, x, n, u):
         disk = sampling.square_to_disk(u)
@@ -279,7 +285,7 @@ class EllipseEmitter:
         cos_l = np.maximum(-_dot(w, self.normal[None]), 0.0)   # lit side only
         cos_x = np.maximum(_dot(n, w), 0.0)
         weight = cos_x * cos_l * self.area / r2
-        return w, dist, self.radiance[None] * weight[:, None]
+        return w, dist, weight
 
 
 class SunCone:
@@ -290,20 +296,20 @@ class SunCone:
     def __init__(self, light: SunLight):
         self.name = light.name
         self.to_light = -light.direction
-        self.irradiance = light.irradiance
+        self.rgb = light.irradiance
         self.cos_max = np.cos(0.5 * light.angle)
         t, b = sampling.orthonormal_basis(self.to_light[None])
         self.frame = (t[0], b[0])
 
     def selection_weight(self, x, n):
-        return (self.irradiance @ LUMINANCE) * (0.1 + np.maximum(n @ self.to_light, 0.0))
+        return (self.rgb @ LUMINANCE) * (0.1 + np.maximum(n @ self.to_light, 0.0))
 
     def sample(self, x, n, u):
         local = sampling.square_to_cone(u, self.cos_max)
         t, b = self.frame
         w = local[:, 0:1] * t + local[:, 1:2] * b + local[:, 2:3] * self.to_light
         cos_x = np.maximum(_dot(n, w), 0.0)
-        return w, np.full(len(x), np.inf), self.irradiance[None] * cos_x[:, None]
+        return w, np.full(len(x), np.inf), cos_x
 
 
 class WorldLight:
@@ -313,15 +319,15 @@ class WorldLight:
     name = "World"
 
     def __init__(self, radiance):
-        self.radiance = np.asarray(radiance, np.float64)
+        self.rgb = np.pi * np.asarray(radiance, np.float64)   # estimate pi L per sample
 
     def selection_weight(self, x, n):
-        return np.full(len(x), np.pi * (self.radiance @ LUMINANCE))
+        return np.full(len(x), self.rgb @ LUMINANCE)
 
     def sample(self, x, n, u):
         t, b = sampling.orthonormal_basis(n)
         w = sampling.to_world(sampling.square_to_cosine_hemisphere(u), t, b, n)
-        return w, np.full(len(x), np.inf), np.broadcast_to(np.pi * self.radiance, (len(x), 3)).copy()
+        return w, np.full(len(x), np.inf), np.ones(len(x))
 
 
 # The light set ------------------------------------------------------------------------------
@@ -397,26 +403,20 @@ class LightSet:
         return w / w.sum(axis=1, keepdims=True)
 
     def delta_rays(self, x, n):
-        """For each delta light: (direction (N,3), distance (N,), irradiance before visibility
-        (N,3)). Generator, so that callers can batch the shadow rays."""
+        """For each delta light: (direction (N,3), distance (N,), scalar weight (N,), rgb (3,));
+        irradiance before visibility = weight * rgb. A generator, so callers batch the rays."""
         for pos, intensity in zip(self.points_pos, self.points_intensity):
-            d = pos - x
-            r2 = np.maximum(_dot(d, d), 1e-300)
-            r = np.sqrt(r2)
-            w = d / r[:, None]
-            cos_x = np.maximum(_dot(n, w), 0.0)
-            yield w, r, intensity[None] * (cos_x / r2)[:, None]
+            w, r, inv_r2 = _towards(pos, x)
+            cos_x = np.einsum("ij,ij->i", n, w)
+            yield w, r, np.maximum(cos_x, 0.0) * inv_r2, intensity
         for pos, axis, intensity, cos_half, blend, _name in self.spots:
-            d = pos - x
-            r2 = np.maximum(_dot(d, d), 1e-300)
-            r = np.sqrt(r2)
-            w = d / r[:, None]
-            cos_x = np.maximum(_dot(n, w), 0.0)
-            mask = spot_mask(-(w @ axis), cos_half, blend)
-            yield w, r, intensity[None] * (cos_x * mask / r2)[:, None]
+            w, r, inv_r2 = _towards(pos, x)
+            cos_x = np.einsum("ij,ij->i", n, w)
+            mask = spot_mask(-(w @ axis.astype(w.dtype)), cos_half, blend)
+            yield w, r, np.maximum(cos_x, 0.0) * inv_r2 * mask, intensity
         for to_light, irradiance, _name in self.suns:
-            cos_x = np.maximum(n @ to_light, 0.0)
-            yield np.broadcast_to(to_light, x.shape).copy(), np.full(len(x), np.inf), irradiance[None] * cos_x[:, None]
+            cos_x = np.maximum(n @ to_light.astype(n.dtype), 0.0)
+            yield np.broadcast_to(to_light.astype(x.dtype), x.shape).copy(), np.full(len(x), np.inf), cos_x, irradiance
         for light in self.collimated:
             yield self._collimated(light, x, n)
 
@@ -437,8 +437,8 @@ class LightSet:
             inside = (np.abs(su) <= 1.0) & (np.abs(sv) <= 1.0)
         ok = inside & (height > 0)
         cos_x = np.maximum(n @ to_light, 0.0)
-        e = (light.power / light.area)[None] * (cos_x * ok)[:, None]
-        return np.broadcast_to(to_light, x.shape).copy(), np.where(ok, height, 0.0), e
+        return (np.broadcast_to(to_light, x.shape).copy(), np.where(ok, height, 0.0), cos_x * ok,
+                light.power / light.area)
 
     def describe(self) -> dict:
         return {

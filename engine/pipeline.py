@@ -93,8 +93,17 @@ class _SceneArrays:
         self.emitted_radiance = table["exitance"].astype(np.float64) / np.pi
         self.both_sides = table["both_sides"]
         self.material_ids = scene.material_ids
-        self.geometric_normals = scene.geometric_normals().astype(np.float64)
+        self.geometric_normals = scene.geometric_normals().astype(np.float32)
         self.shading_normals = scene.shading_normals
+        # Flat-shaded meshes need no interpolation: drop normals equal to the geometric ones.
+        if self.shading_normals is not None:
+            agree = np.einsum("tkj,tj->tk", self.shading_normals, self.geometric_normals)
+            self.smooth = np.any(np.abs(agree) < 0.99999, axis=1)
+            if not self.smooth.any():
+                self.shading_normals = None
+        self.is_diffuse = np.any(self.diffuse > 0, axis=1)
+        self.diffuse_over_pi = self.diffuse / np.pi
+        self.is_specular = np.any(self.specular > 0, axis=1)
         self.has_specular = bool(np.any(self.specular > 0))
         self.has_emission = bool(np.any(self.emitted_radiance > 0))
 
@@ -125,26 +134,29 @@ def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArr
         stats["trace_seconds"] += time.perf_counter() - t0
         stats["camera_rays" if depth == 0 else "specular_rays"] += len(origins)
         hit = prim >= 0
-        if not scene.world.is_black and not np.all(hit):
+        all_hit = bool(hit.all())
+        if not all_hit and not scene.world.is_black:
             radiance[ray_of[~hit]] += throughput[~hit] * world
-        if not np.any(hit):
+        if not hit.any():
             break
-        prim, bu, bv = prim[hit], bu[hit], bv[hit]
-        d = directions[hit]
-        rays = ray_of[hit]
-        thr = throughput[hit]
-        x = accel.hit_points(prim, bu, bv)
+        if not all_hit:
+            prim, bu, bv, t_hit = prim[hit], bu[hit], bv[hit], _t[hit]
+            d, o, rays, thr = directions[hit], origins[hit], ray_of[hit], throughput[hit]
+        else:
+            t_hit, d, o, rays, thr = _t, directions, origins, ray_of, throughput
+        x = o + t_hit[:, None] * d
         ng = arrays.geometric_normals[prim]
-        front = np.einsum("ij,ij->i", ng, d) < 0          # the ray meets the wound front side
-        ng = np.where(front[:, None], ng, -ng)              # towards the viewer
+        facing = np.einsum("ij,ij->i", ng, d)
+        front = facing < 0                                   # the ray meets the wound front side
+        ng *= np.where(front, 1.0, -1.0).astype(np.float32)[:, None]   # towards the viewer
         if arrays.shading_normals is not None:
-            corner = arrays.shading_normals[prim].astype(np.float64)
+            corner = arrays.shading_normals[prim]
             w = np.stack([1.0 - bu - bv, bu, bv], axis=1)[..., None]
             ns = (corner * w).sum(axis=1)
             ns = np.where(front[:, None], ns, -ns)
             ns /= np.maximum(np.linalg.norm(ns, axis=1, keepdims=True), 1e-12)
             # A shading normal that points away from the viewer would shade the wrong side.
-            ns = np.where((np.einsum("ij,ij->i", ns, d) < 0)[:, None], ns, ng)
+            ns = np.where((np.einsum("ij,ij->i", ns, d) < 0)[:, None], ns, ng).astype(np.float32)
         else:
             ns = ng
         mat = arrays.material_ids[prim]
@@ -153,23 +165,30 @@ def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArr
             emitted = arrays.emitted_radiance[mat] * (front | arrays.both_sides[mat])[:, None]
             radiance[rays] += thr * emitted
 
-        rho_d = arrays.diffuse[mat]
-        diffuse = np.any(rho_d > 0, axis=1)
-        if np.any(diffuse):
+        diffuse = arrays.is_diffuse[mat]
+        if diffuse.all():
+            idx = slice(None)
+        elif diffuse.any():
             idx = np.nonzero(diffuse)[0]
+        else:
+            idx = None
+        if idx is not None:
             shadow_stats = {}
             e = direct_irradiance(x[idx], ns[idx], lights, accel, rng, settings.light_samples,
                                   stats=shadow_stats, offset_normals=ng[idx], ray_log=ray_log)
             stats["shadow_rays"] += shadow_stats.get("shadow_rays", 0)
             stats["trace_seconds"] += shadow_stats.get("trace_seconds", 0.0)
-            radiance[rays[idx]] += thr[idx] * rho_d[idx] * e / np.pi
+            e *= arrays.diffuse_over_pi[mat[idx]]
+            if depth > 0:
+                e *= thr[idx]
+            radiance[rays[idx]] += e
 
         if not arrays.has_specular or depth == settings.max_specular_depth:
             break
-        rho_s = arrays.specular[mat]
-        mirror = np.any(rho_s > 0, axis=1)
-        if not np.any(mirror):
+        mirror = arrays.is_specular[mat]
+        if not mirror.any():
             break
+        rho_s = arrays.specular[mat]
         idx = np.nonzero(mirror)[0]
         dm, nm = d[idx], ns[idx]
         reflected = dm - 2.0 * np.einsum("ij,ij->i", dm, nm)[:, None] * nm
