@@ -336,12 +336,12 @@ class Scene:
 
         # Drop NaN / infinite corners and zero-area triangles, naming the objects.
         finite = np.all(np.isfinite(tris), axis=(1, 2))
-        e1 = tris[:, 1].astype(np.float64) - tris[:, 0]
-        e2 = tris[:, 2].astype(np.float64) - tris[:, 0]
         with np.errstate(invalid="ignore", over="ignore"):
-            doubled_area = np.linalg.norm(np.cross(e1, e2), axis=1)
-        scale = np.max(np.abs(tris[finite]), initial=1.0) if count else 1.0
-        keep = finite & (doubled_area > (scale * 1e-7) ** 2)
+            cross = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+            doubled_area_sq = np.einsum("ij,ij->i", cross, cross)
+        scale = float(np.max(np.abs(tris[finite]), initial=1.0)) if count else 1.0
+        # Zero area, or so small against the coordinates that float32 cannot resolve it.
+        keep = finite & (doubled_area_sq > (scale * 1e-7) ** 4)
         if count and not np.all(keep):
             for reason, mask in (("non-finite vertices", ~finite), ("zero area", finite & ~keep)):
                 if np.any(mask):
@@ -356,12 +356,13 @@ class Scene:
         if normals is not None:
             normals = normals[keep]
             bad = ~np.all(np.isfinite(normals), axis=(1, 2))
-            lengths = np.linalg.norm(normals, axis=2)
-            bad |= np.any(lengths < 1e-6, axis=1)
+            lengths = np.sqrt(np.einsum("tkj,tkj->tk", normals, normals))
+            bad |= np.any(~(lengths > 1e-6), axis=1)
             if np.any(bad):
                 normals[bad] = self.geometric_normals()[bad][:, None, :]
-                lengths = np.linalg.norm(normals, axis=2)
-            normals = normals / lengths[..., None]
+                lengths[bad] = 1.0
+            if np.any(np.abs(lengths - 1.0) > 1e-4):
+                normals = normals / lengths[..., None]
             self.shading_normals = np.ascontiguousarray(normals, dtype=np.float32)
         return self
 

@@ -1,0 +1,983 @@
+"""Blender depsgraph -> :class:`lanterna.engine.scene.Scene`: the only place that reads Blender
+data for rendering.
+
+What it computes
+----------------
+:func:`export_scene` walks an evaluated depsgraph (modifiers, geometry nodes, constraints and
+animation already applied by Blender) and turns it into the renderer's inert scene:
+
+* **Geometry**: every visible mesh-like object (mesh, curve, surface, text, metaball) and every
+  instance (collection instances, vertex/face instancing, particles, geometry-nodes instances),
+  triangulated with Blender's loop triangles. Corner ("split") normals become the shading
+  normals. Positions are transformed by the instance's world matrix and normals by its cofactor
+  matrix (the inverse transpose times the determinant, signed so that normals keep their side),
+  in numpy. The triangles of one mesh datablock are read once however often it is instanced,
+  and all instances of one mesh are transformed together (one batch of numpy per mesh). Render
+  visibility follows Blender: Disable in Renders, Show Instancer for Render, and the original
+  of an object instanced on its parent's vertices or faces is hidden. Hair curves, point
+  clouds, volumes and grease pencil are reported and skipped.
+  Output: ``triangles`` (T, 3, 3) float32 [m], ``shading_normals`` (T, 3, 3) float32,
+  ``material_ids`` (T,) int32 into ``materials``, ``object_ids`` (T,) int32 into
+  ``object_names``.
+* **Materials** (one per Blender material, deduplicated; slots without a material and objects
+  without slots share a default grey diffuse of rho_d = 0.8): when the material has a
+  ``lanterna`` property group with ``derive_from_nodes`` False, its ``diffuse``, ``specular``
+  and ``exitance`` are used as they are. Otherwise they are derived from the node tree feeding
+  the active Material Output's Surface:
+
+  - Principled BSDF: rho_d = Base Color (1 - Metallic)(1 - Transmission Weight),
+    rho_s = Base Color x Metallic (a perfect mirror, whatever the Roughness), exitance
+    M = pi x Emission Color x Emission Strength. The dielectric specular layer (about 4 % at
+    IOR 1.5), coat, sheen and transmission are neglected (non-zero coat, sheen, transmission
+    and Alpha < 1 are reported). Blender 5 defaults: Emission Color white, Strength 0.
+  - Diffuse BSDF: rho_d = Color. Emission: M = pi x Color x Strength, rho_d = 0.
+  - Glossy BSDF: rho_s = Color. Metallic BSDF: rho_s = Base Color (F82 mode) or the
+    normal-incidence Fresnel reflectance ((n-1)^2 + k^2) / ((n+1)^2 + k^2) per channel.
+  - Mix Shader: (1 - Fac) A + Fac B; Add Shader: A + B.
+  - Glass / Refraction: only the reflected Fresnel part at normal incidence, as a mirror.
+  - Translucent, Subsurface, Sheen, Toon, hair and other shaders with a colour: treated as a
+    diffuse of that colour. Transparent and Holdout: black. Anything else: default grey.
+
+  Inputs fed by a Color (RGB) or Value node take that node's value; any other link (a texture,
+  a math node ...) is reported once per material and socket and the socket's default value is
+  used. rho_d and rho_s are clipped to [0, 1] and scaled down per channel where
+  rho_d + rho_s > 1, with a warning. Emissive meshes need no light objects: the core builds
+  mesh lights from triangles whose material has ``exitance`` > 0 (``emit_both_sides`` True,
+  as Cycles emits from both faces).
+* **Lights** (also instanced ones), colour = Color x (blackbody colour if Use Temperature)
+  x Power x 2^Exposure:
+
+  - Point: :class:`PointLight`, flux Phi = P x colour [W]. A radius (Radius / shadow_soft_size
+    > 0) is ignored, with a warning: the light is a point.
+  - Spot: :class:`SpotLight`, half angle = Spot Size / 2, blend = Spot Blend, flux as a point,
+    axis = the light's world -Z. Square spots are reported and treated as round.
+  - Sun: :class:`SunLight`, irradiance = Strength x colour [W/m^2], direction = world -Z,
+    angle = Angle [rad].
+  - Area: :class:`AreaLight`, shape, world matrix, size_x = Size, size_y = Size Y [m], power =
+    P x colour [W] (x world area [m^2] when Normalize is off); ``collimated`` when Spread
+    < 1e-3 rad; other spreads below 180 deg are reported and treated as 180 deg.
+  - Zero power is skipped silently; negative power is skipped with a warning; light node trees
+    are reported (once per light) and ignored.
+* **World**: a uniform environment of radiance = Background Color x Strength
+  [W m^-2 sr^-1] (Mix/Add shaders of backgrounds are combined); a linked Color or Strength is
+  reported and its default used; no world is black. A new World in Blender 5 is grey 0.05 and
+  Cycles adds it, so it is kept.
+* **Camera**: the scene's active camera, perspective (orthographic and panoramic cameras are
+  reported and treated as perspective with the same lens and sensor). Blender's sensor fit:
+  AUTO fits Sensor Width to the larger side of the frame (in pixels x pixel aspect), HORIZONTAL
+  fits Sensor Width to the width, VERTICAL fits Sensor Height to the height. tan_half =
+  sensor / (2 lens) on the fitted side, the other side follows the frame's aspect. Shift X/Y
+  are in units of the fitted side (so the plane shift is shift x 2 tan_half of that side).
+  The camera matrix's scale is removed (as Cycles and ``world_to_camera_view`` do).
+
+Parameters of :func:`export_scene`
+----------------------------------
+``depsgraph``
+    An evaluated ``bpy.types.Depsgraph`` (the RenderEngine's, or
+    ``bpy.context.evaluated_depsgraph_get()``).
+``resolution``
+    (width, height) in pixels of the full frame; default: Render Resolution x Percentage / 100
+    (integer division, as Blender).
+``border``
+    (x0, y0, x1, y1) in pixels, y from the bottom, x1/y1 exclusive; default: when the scene's
+    Render Region (``use_border``) is on, (min_x W, min_y H, max_x W, max_y H) truncated to
+    integers as Blender does; otherwise the whole frame.
+
+Units (DESIGN.md section 3): metres and radians throughout; point/spot flux and area power in
+W; sun irradiance in W/m^2; emission Strength S gives radiance S x colour, i.e. exitance
+M = pi S per side; world colour is radiance. Reflectances are linear RGB in [0, 1].
+
+Errors: input that cannot be rendered raises :class:`SceneError` naming the object and the
+problem (no camera, a non-finite camera or light transform ...). Meshes whose transform is not
+finite are skipped with a warning naming the object; non-finite or degenerate triangles are
+dropped by :meth:`Scene.validate`. Warnings are deduplicated and kept in ``Scene.warnings``;
+``Scene.stats`` holds the export time and counts.
+
+:func:`export_settings` turns ``Scene.lanterna`` (any nested property groups included) into
+:class:`lanterna.engine.pipeline.RenderSettings`, falling back on that class's defaults.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import time
+import warnings as _py_warnings
+
+import numpy as np
+
+import bpy
+
+from ..pipeline import RenderSettings
+from ..scene import (AREA_SHAPES, AreaLight, Camera, Material, PointLight, Scene, SceneError,
+                     SpotLight, SunLight, World)
+
+__all__ = ["export_scene", "export_settings", "benchmark_export"]
+
+GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
+UNSUPPORTED_TYPES = {"CURVES", "POINTCLOUD", "VOLUME", "GREASEPENCIL", "GPENCIL"}
+COLLIMATED_SPREAD = 1e-3            # rad: below this an area light's Spread counts as zero
+DEFAULT_DIFFUSE = 0.8
+_LUMA = np.array([0.2126, 0.7152, 0.0722])   # colour -> float conversion of a linked socket
+
+
+# ---------------------------------------------------------------------------------------------
+# Warnings
+# ---------------------------------------------------------------------------------------------
+class _Warnings:
+    """An ordered, deduplicated list of messages."""
+
+    def __init__(self):
+        self.messages: list[str] = []
+        self._seen: set[str] = set()
+
+    def __call__(self, message: str) -> None:
+        if message not in self._seen:
+            self._seen.add(message)
+            self.messages.append(message)
+
+
+def _fmt(v) -> str:
+    arr = np.atleast_1d(np.asarray(v, dtype=float))
+    if arr.size == 1:
+        return f"{arr[0]:.4g}"
+    return "(" + ", ".join(f"{x:.4g}" for x in arr) + ")"
+
+
+def _article(word: str) -> str:
+    return "an" if word[:1].lower() in "aeiou" else "a"
+
+
+# ---------------------------------------------------------------------------------------------
+# Mesh reading (cached per mesh datablock)
+# ---------------------------------------------------------------------------------------------
+@dataclasses.dataclass
+class _MeshData:
+    co: np.ndarray          # (V, 3) float32, object space
+    tri_verts: np.ndarray   # (T*3,) int32 into co
+    tri_loops: np.ndarray   # (T*3,) int32 into corner_normals
+    corner_normals: np.ndarray  # (L, 3) float32, object space
+    mat_index: np.ndarray   # (T,) int32, material slot per triangle
+
+    @property
+    def count(self) -> int:
+        return len(self.mat_index)
+
+
+def _attribute(mesh, name: str, domain: str, data_type: str, prop: str, dtype, size: int):
+    """A mesh attribute read through the attribute API (a raw array copy, fast), or None."""
+    attr = mesh.attributes.get(name)
+    if attr is None or attr.domain != domain or attr.data_type != data_type:
+        return None
+    width = 3 if prop == "vector" else 1
+    out = np.empty(size * width, dtype)
+    attr.data.foreach_get(prop, out)
+    return out
+
+
+def _read_mesh(mesh) -> _MeshData | None:
+    """Loop triangles, positions and corner normals of ``mesh`` with ``foreach_get``.
+
+    The attribute API (``position``, ``.corner_vert``, ``material_index``) and
+    ``loop_triangle_polygons`` copy raw arrays; ``loop_triangles`` is read only for its corner
+    indices, the one per-triangle array Blender does not expose raw."""
+    calc = getattr(mesh, "calc_loop_triangles", None)   # gone in Blender 5: always up to date
+    if calc is not None:
+        calc()
+    tris = mesh.loop_triangles
+    n_tri = len(tris)
+    if n_tri == 0:
+        return None
+    n_vert, n_corner, n_face = len(mesh.vertices), len(mesh.loops), len(mesh.polygons)
+
+    co = _attribute(mesh, "position", "POINT", "FLOAT_VECTOR", "vector", np.float32, n_vert)
+    if co is None:
+        co = np.empty(n_vert * 3, np.float32)
+        mesh.vertices.foreach_get("co", co)
+
+    tri_loops = np.empty(n_tri * 3, np.int32)
+    tris.foreach_get("loops", tri_loops)
+    corner_vert = _attribute(mesh, ".corner_vert", "CORNER", "INT", "value", np.int32, n_corner)
+    if corner_vert is None:
+        corner_vert = np.empty(n_corner, np.int32)
+        mesh.loops.foreach_get("vertex_index", corner_vert)
+    tri_verts = corner_vert[tri_loops]
+
+    face_mat = _attribute(mesh, "material_index", "FACE", "INT", "value", np.int32, n_face)
+    tri_face = getattr(mesh, "loop_triangle_polygons", None)
+    if face_mat is None:
+        mat_index = np.zeros(n_tri, np.int32)
+    elif tri_face is not None and len(tri_face) == n_tri:
+        faces = np.empty(n_tri, np.int32)
+        tri_face.foreach_get("value", faces)
+        mat_index = face_mat[faces]
+    else:
+        mat_index = np.empty(n_tri, np.int32)
+        tris.foreach_get("material_index", mat_index)
+
+    corner = getattr(mesh, "corner_normals", None)
+    if corner is not None and len(corner) == n_corner:
+        normals = np.empty(n_corner * 3, np.float32)
+        corner.foreach_get("vector", normals)
+    else:  # older Blender: per-triangle split normals
+        normals = np.empty(n_tri * 9, np.float32)
+        tris.foreach_get("split_normals", normals)
+        tri_loops = np.arange(n_tri * 3, dtype=np.int32)
+    return _MeshData(co.reshape(-1, 3), tri_verts, tri_loops, normals.reshape(-1, 3), mat_index)
+
+
+def _gather_rows(src: np.ndarray, index: np.ndarray, out: np.ndarray) -> None:
+    """out[i] = src[index[i]] for (N, 3) float32 rows, as one 12-byte item per row (faster than
+    ``np.take(axis=0)``)."""
+    row = np.dtype((np.void, 12))
+    src = np.ascontiguousarray(src, dtype=np.float32)
+    np.take(src.view(row).reshape(-1), index, out=out.view(row).reshape(-1))
+
+
+def _normal_matrices(m3: np.ndarray) -> np.ndarray:
+    """Cofactor matrices of (N, 3, 3) ``m3`` times sign(det): they transform normals like the
+    inverse transpose (up to a positive scale) and stay defined for singular matrices."""
+    a, b, c = m3[:, :, 0], m3[:, :, 1], m3[:, :, 2]
+    bc = np.cross(b, c)
+    cof = np.stack([bc, np.cross(c, a), np.cross(a, b)], axis=2)
+    det = np.einsum("ij,ij->i", a, bc)
+    return cof * np.where(det < 0, -1.0, 1.0)[:, None, None]
+
+
+@dataclasses.dataclass
+class _Group:
+    """Instances of one mesh with one material mapping."""
+    data: _MeshData
+    lut: np.ndarray                     # material slot -> global material id
+    matrices: list = dataclasses.field(default_factory=list)     # 4x4 world matrices
+    names: list = dataclasses.field(default_factory=list)       # object name per instance
+    object_ids: np.ndarray | None = None
+
+
+# ---------------------------------------------------------------------------------------------
+# Materials
+# ---------------------------------------------------------------------------------------------
+class _NodeReader:
+    """Evaluates a material's (or world's) shader nodes into constant radiometric values."""
+
+    def __init__(self, owner: str, warn: _Warnings):
+        self.owner = owner      # e.g. "Material 'Wood'"
+        self.warn = warn
+
+    # Links ---------------------------------------------------------------------------------
+    @staticmethod
+    def source(socket):
+        """(node, output socket) feeding input ``socket``, through reroutes and muted nodes;
+        None when nothing (or a muted link) feeds it."""
+        for _ in range(256):
+            if socket is None or not socket.is_linked:
+                return None
+            link = socket.links[0]
+            if getattr(link, "is_muted", False) or not getattr(link, "is_valid", True):
+                return None
+            node, out = link.from_node, link.from_socket
+            if node.type == "REROUTE":
+                socket = node.inputs[0]
+                continue
+            if getattr(node, "mute", False):
+                socket = next((il.from_socket for il in node.internal_links
+                               if il.to_socket == out), None)
+                continue
+            return node, out
+        return None
+
+    @staticmethod
+    def input(node, *names):
+        for name in names:
+            sock = node.inputs.get(name)
+            if sock is not None:
+                return sock
+        return None
+
+    def _linked_warning(self, node, sock, src_node, what: str, value) -> None:
+        label = src_node.bl_label
+        named = "" if src_node.name == label else f" ('{src_node.name}')"
+        self.warn(f"{self.owner}: {sock.name} of '{node.name}' is driven by {_article(label)} "
+                  f"{label} node{named}; using its default {what} {_fmt(value)}")
+
+    def colour(self, node, *names, default=(0.0, 0.0, 0.0)) -> np.ndarray:
+        sock = self.input(node, *names)
+        if sock is None:
+            return np.array(default, float)
+        value = np.array(sock.default_value[:3], float) if hasattr(sock, "default_value") \
+            else np.array(default, float)
+        src = self.source(sock)
+        if src is None:
+            return value
+        src_node, out = src
+        if src_node.type in ("RGB", "VALUE") and hasattr(out, "default_value"):
+            v = out.default_value
+            return np.array(v[:3], float) if hasattr(v, "__len__") else np.full(3, float(v))
+        self._linked_warning(node, sock, src_node, "colour", value)
+        return value
+
+    def scalar(self, node, *names, default=0.0) -> float:
+        sock = self.input(node, *names)
+        if sock is None:
+            return float(default)
+        value = float(sock.default_value) if hasattr(sock, "default_value") else float(default)
+        src = self.source(sock)
+        if src is None:
+            return value
+        src_node, out = src
+        if src_node.type in ("RGB", "VALUE") and hasattr(out, "default_value"):
+            v = out.default_value
+            return float(np.dot(_LUMA, v[:3])) if hasattr(v, "__len__") else float(v)
+        self._linked_warning(node, sock, src_node, "value", value)
+        return value
+
+    def check_normal(self, node) -> None:
+        sock = node.inputs.get("Normal")
+        src = self.source(sock) if sock is not None else None
+        if src is not None:
+            label = src[0].bl_label
+            self.warn(f"{self.owner}: Normal of '{node.name}' is driven by {_article(label)} "
+                      f"{label} node; bump and normal mapping are ignored")
+
+    # Shaders -------------------------------------------------------------------------------
+    def shader(self, src, depth: int = 0):
+        """(rho_d, rho_s, exitance) of the shader feeding a socket; black when unlinked."""
+        zero = np.zeros(3)
+        if src is None:
+            return zero, zero, zero
+        node, out = src
+        t = node.type
+        name = f"'{node.name}'"
+        grey = (np.full(3, DEFAULT_DIFFUSE), zero, zero)
+        if depth > 64:
+            self.warn(f"{self.owner}: shader nodes nested too deep at {name}; using grey")
+            return grey
+        if out.type != "SHADER":
+            self.warn(f"{self.owner}: {node.bl_label} node {name} (not a shader) feeds a shader "
+                      f"input; using grey diffuse {DEFAULT_DIFFUSE}")
+            return grey
+
+        if t == "BSDF_PRINCIPLED":
+            base = self.colour(node, "Base Color", default=(0.8, 0.8, 0.8))
+            metallic = float(np.clip(self.scalar(node, "Metallic"), 0, 1))
+            transmission = float(np.clip(self.scalar(node, "Transmission Weight", "Transmission"),
+                                         0, 1))
+            diffuse = base * (1 - metallic) * (1 - transmission)
+            specular = base * metallic
+            emission = (math.pi * self.colour(node, "Emission Color", "Emission",
+                                              default=(1, 1, 1))
+                        * self.scalar(node, "Emission Strength", default=0.0))
+            if metallic > 0:
+                rough = self.scalar(node, "Roughness", default=0.5)
+                if rough > 0.1:
+                    self.warn(f"{self.owner}: metallic part of {name} (Roughness {_fmt(rough)}) "
+                              f"is rendered as a perfect mirror")
+            if transmission > 0:
+                self.warn(f"{self.owner}: Transmission {_fmt(transmission)} of {name} is not "
+                          f"supported; the transmitted light is lost")
+            for sock_name in ("Coat Weight", "Sheen Weight"):
+                if self.input(node, sock_name) is not None and self.scalar(node, sock_name) > 0:
+                    self.warn(f"{self.owner}: {sock_name} of {name} is ignored")
+            if self.input(node, "Alpha") is not None and self.scalar(node, "Alpha", default=1) < 1:
+                self.warn(f"{self.owner}: Alpha < 1 of {name} is ignored (rendered opaque)")
+            self.check_normal(node)
+            return diffuse, specular, emission
+
+        if t == "BSDF_DIFFUSE":
+            self.check_normal(node)
+            return self.colour(node, "Color", default=(0.8, 0.8, 0.8)), zero, zero
+
+        if t == "EMISSION":
+            return zero, zero, (math.pi * self.colour(node, "Color", default=(1, 1, 1))
+                                * self.scalar(node, "Strength", default=1.0))
+
+        if t in ("BSDF_GLOSSY", "BSDF_ANISOTROPIC", "BSDF_METALLIC"):
+            if t == "BSDF_METALLIC" and getattr(node, "fresnel_type", "F82") != "F82":
+                n = np.array(self.input(node, "IOR").default_value[:3], float)
+                k = np.array(self.input(node, "Extinction").default_value[:3], float)
+                specular = ((n - 1) ** 2 + k ** 2) / np.maximum((n + 1) ** 2 + k ** 2, 1e-12)
+            else:
+                specular = self.colour(node, "Base Color", "Color", default=(0.8, 0.8, 0.8))
+            rough = self.scalar(node, "Roughness", default=0.5)
+            if rough > 0.1:
+                self.warn(f"{self.owner}: {node.bl_label} {name} (Roughness {_fmt(rough)}) is "
+                          f"rendered as a perfect mirror")
+            self.check_normal(node)
+            return zero, specular, zero
+
+        if t in ("MIX_SHADER", "ADD_SHADER"):
+            shaders = [s for s in node.inputs if s.type == "SHADER"]
+            a = self.shader(self.source(shaders[0]), depth + 1)
+            b = self.shader(self.source(shaders[1]), depth + 1)
+            if t == "ADD_SHADER":
+                return tuple(x + y for x, y in zip(a, b))
+            fac = float(np.clip(self.scalar(node, "Fac", "Factor", default=0.5), 0, 1))
+            return tuple((1 - fac) * x + fac * y for x, y in zip(a, b))
+
+        if t in ("BSDF_GLASS", "BSDF_REFRACTION"):
+            ior = self.scalar(node, "IOR", default=1.5)
+            f0 = ((ior - 1) / (ior + 1)) ** 2
+            self.warn(f"{self.owner}: refraction of {node.bl_label} {name} is not supported; "
+                      f"only its reflection ({_fmt(f0)} at normal incidence) is kept, as a mirror")
+            colour = self.colour(node, "Color", default=(1, 1, 1))
+            return zero, colour * f0, zero
+
+        if t in ("BSDF_TRANSPARENT", "HOLDOUT"):
+            self.warn(f"{self.owner}: {node.bl_label} {name} is not supported; rendered black")
+            return zero, zero, zero
+
+        colour_sock = self.input(node, "Color", "Base Color")
+        if colour_sock is not None:
+            colour = self.colour(node, "Color", "Base Color", default=(0.8, 0.8, 0.8))
+            self.warn(f"{self.owner}: {node.bl_label} {name} is not supported; treated as a "
+                      f"diffuse of colour {_fmt(colour)}")
+            return colour, zero, zero
+        self.warn(f"{self.owner}: {node.bl_label} {name} is not supported; using grey diffuse "
+                  f"{DEFAULT_DIFFUSE}")
+        return grey
+
+
+def _active_output(tree, node_type: str):
+    outputs = [n for n in tree.nodes if n.type == node_type]
+    for n in outputs:
+        if getattr(n, "is_active_output", False) and getattr(n, "target", "ALL") in ("ALL", "CYCLES"):
+            return n
+    for n in outputs:
+        if getattr(n, "target", "ALL") in ("ALL", "CYCLES"):
+            return n
+    return outputs[0] if outputs else None
+
+
+def _clamp_reflectances(name: str, diffuse, specular, exitance, warn: _Warnings):
+    diffuse, specular, exitance = (np.asarray(x, float) for x in (diffuse, specular, exitance))
+    for what, arr in (("diffuse reflectance", diffuse), ("specular reflectance", specular),
+                      ("exitance", exitance)):
+        if not np.all(np.isfinite(arr)):
+            raise SceneError(f"Material '{name}': {what} is not finite ({_fmt(arr)})")
+        if np.any(arr < 0):
+            warn(f"Material '{name}': negative {what} {_fmt(arr)} clipped to 0")
+    diffuse, specular, exitance = (np.maximum(x, 0.0) for x in (diffuse, specular, exitance))
+    total = diffuse + specular
+    if np.any(total > 1.0):
+        warn(f"Material '{name}': diffuse + specular reflectance {_fmt(total)} exceeds 1; "
+             f"scaled down to conserve energy")
+        scale = 1.0 / np.maximum(total, 1.0)
+        diffuse, specular = diffuse * scale, specular * scale
+    return diffuse, specular, exitance
+
+
+def _convert_material(mat, warn: _Warnings) -> Material:
+    """A Blender material -> :class:`Material` (see the module docstring)."""
+    name = mat.name
+    props = getattr(mat, "lanterna", None)
+    if props is not None and not getattr(props, "derive_from_nodes", True):
+        d = getattr(props, "diffuse", (DEFAULT_DIFFUSE,) * 3)
+        s = getattr(props, "specular", (0.0, 0.0, 0.0))
+        e = getattr(props, "exitance", (0.0, 0.0, 0.0))
+        d, s, e = _clamp_reflectances(name, d[:3], s[:3], e[:3], warn)
+        return Material(name, diffuse=d, specular=s, exitance=e)
+
+    tree = mat.node_tree
+    with _py_warnings.catch_warnings():   # Material.use_nodes is deprecated in Blender 5
+        _py_warnings.simplefilter("ignore", DeprecationWarning)
+        use_nodes = tree is not None and getattr(mat, "use_nodes", True)
+    if not use_nodes:
+        # Cycles renders a node-less material as a Diffuse BSDF of the viewport colour.
+        d, s, e = _clamp_reflectances(name, mat.diffuse_color[:3], (0, 0, 0), (0, 0, 0), warn)
+        return Material(name, diffuse=d, specular=s, exitance=e)
+
+    reader = _NodeReader(f"Material '{name}'", warn)
+    out = _active_output(tree, "OUTPUT_MATERIAL")
+    if out is None:
+        warn(f"Material '{name}' has no Material Output node; rendered black")
+        return Material(name, diffuse=np.zeros(3))
+    src = reader.source(out.inputs.get("Surface"))
+    if src is None:
+        warn(f"Material '{name}': nothing is connected to the Material Output's Surface; "
+             f"rendered black")
+        return Material(name, diffuse=np.zeros(3))
+    d, s, e = reader.shader(src)
+    d, s, e = _clamp_reflectances(name, d, s, e, warn)
+    return Material(name, diffuse=d, specular=s, exitance=e)
+
+
+# ---------------------------------------------------------------------------------------------
+# Lights
+# ---------------------------------------------------------------------------------------------
+def _convert_light(name: str, light, matrix: np.ndarray, warn: _Warnings):
+    """A Blender light with its 4x4 world matrix -> a core light, or None (zero power)."""
+    colour = np.array(light.color[:3], float)
+    if getattr(light, "use_temperature", False):
+        colour = colour * np.array(light.temperature_color[:3], float)
+    power = colour * float(light.energy) * 2.0 ** float(getattr(light, "exposure", 0.0))
+    if not np.all(np.isfinite(power)):
+        raise SceneError(f"Light '{name}': power {_fmt(power)} is not finite")
+    if np.all(power == 0):
+        return None
+    if np.any(power < 0):
+        warn(f"Light '{name}': negative power {_fmt(power)} is not supported; light skipped")
+        return None
+    if not np.all(np.isfinite(matrix)):
+        raise SceneError(f"Light '{name}': world matrix is not finite (NaN or infinite "
+                         f"location, rotation or scale)")
+    if getattr(light, "use_nodes", False) and light.node_tree is not None:
+        warn(f"Light '{name}': light nodes are ignored; using Color x Power")
+    normalize = getattr(light, "normalize", True)
+    position = matrix[:3, 3]
+    down = -matrix[:3, 2]          # the light's local -Z in world space
+    kind = light.type
+
+    if kind in ("POINT", "SPOT"):
+        radius = float(getattr(light, "shadow_soft_size", 0.0))
+        if radius > 0:
+            warn(f"Light '{name}': radius {_fmt(radius)} m is ignored; rendered as a point "
+                 f"light (hard shadows)")
+        if not normalize:
+            warn(f"Light '{name}': Normalize off is not supported; treated as normalized")
+        if kind == "POINT":
+            return PointLight(name, position=position, flux=power)
+        if getattr(light, "use_square", False):
+            warn(f"Light '{name}': square spot cone is treated as round")
+        if np.linalg.norm(down) == 0:
+            raise SceneError(f"Light '{name}': zero scale, the spot has no direction")
+        return SpotLight(name, position=position, direction=down, flux=power,
+                         half_angle=0.5 * float(light.spot_size), blend=float(light.spot_blend))
+
+    if kind == "SUN":
+        if not normalize:
+            warn(f"Light '{name}': Normalize off is not supported; treated as normalized")
+        if np.linalg.norm(down) == 0:
+            raise SceneError(f"Light '{name}': zero scale, the sun has no direction")
+        return SunLight(name, direction=down, irradiance=power, angle=float(light.angle))
+
+    if kind == "AREA":
+        shape = light.shape
+        if shape not in AREA_SHAPES:
+            raise SceneError(f"Light '{name}': unknown area light shape {shape!r}")
+        size_x = float(light.size)
+        size_y = float(light.size_y) if shape in ("RECTANGLE", "ELLIPSE") else size_x
+        spread = float(getattr(light, "spread", math.pi))
+        collimated = spread < COLLIMATED_SPREAD
+        if not collimated and spread < math.pi - 1e-4:
+            warn(f"Light '{name}': Spread {math.degrees(spread):.4g} deg is treated as 180 deg")
+        area = AreaLight(name, shape=shape, matrix=matrix, size_x=size_x, size_y=size_y,
+                         power=power, collimated=collimated)
+        if not normalize:       # Cycles: power is then per square metre of the light
+            area.power = area.power * area.area
+        return area
+
+    warn(f"Light '{name}': light type {kind} is not supported; skipped")
+    return None
+
+
+# ---------------------------------------------------------------------------------------------
+# World
+# ---------------------------------------------------------------------------------------------
+def _world_radiance(reader: _NodeReader, src, depth: int = 0) -> np.ndarray:
+    if src is None:
+        return np.zeros(3)
+    node, out = src
+    t = node.type
+    if t in ("BACKGROUND", "EMISSION"):
+        return (reader.colour(node, "Color", default=(0.05, 0.05, 0.05))
+                * reader.scalar(node, "Strength", default=1.0))
+    if t in ("MIX_SHADER", "ADD_SHADER") and depth < 64:
+        shaders = [s for s in node.inputs if s.type == "SHADER"]
+        a = _world_radiance(reader, reader.source(shaders[0]), depth + 1)
+        b = _world_radiance(reader, reader.source(shaders[1]), depth + 1)
+        if t == "ADD_SHADER":
+            return a + b
+        fac = float(np.clip(reader.scalar(node, "Fac", "Factor", default=0.5), 0, 1))
+        return (1 - fac) * a + fac * b
+    reader.warn(f"{reader.owner}: {node.bl_label} node '{node.name}' feeding the World Output "
+                f"is not supported; the world is black")
+    return np.zeros(3)
+
+
+def _export_world(world, warn: _Warnings) -> World:
+    if world is None:
+        return World()
+    tree = world.node_tree
+    with _py_warnings.catch_warnings():   # World.use_nodes is deprecated in Blender 5
+        _py_warnings.simplefilter("ignore", DeprecationWarning)
+        use_nodes = tree is not None and getattr(world, "use_nodes", True)
+    if not use_nodes:
+        radiance = np.array(world.color[:3], float)
+    else:
+        reader = _NodeReader(f"World '{world.name}'", warn)
+        out = _active_output(tree, "OUTPUT_WORLD")
+        radiance = np.zeros(3) if out is None else \
+            _world_radiance(reader, reader.source(out.inputs.get("Surface")))
+    if not np.all(np.isfinite(radiance)):
+        raise SceneError(f"World '{world.name}': colour {_fmt(radiance)} is not finite")
+    if np.any(radiance < 0):
+        warn(f"World '{world.name}': negative colour {_fmt(radiance)} clipped to 0")
+    return World(radiance=np.maximum(radiance, 0.0))
+
+
+# ---------------------------------------------------------------------------------------------
+# Camera
+# ---------------------------------------------------------------------------------------------
+def render_resolution(render) -> tuple[int, int]:
+    """Blender's full-frame size in pixels: Resolution x Percentage / 100 (integer division)."""
+    pct = int(render.resolution_percentage)
+    return (int(render.resolution_x) * pct // 100, int(render.resolution_y) * pct // 100)
+
+
+def render_border(render, resolution) -> tuple[int, int, int, int] | None:
+    """The Render Region in pixels (x0, y0, x1, y1), y from the bottom, truncated like Blender
+    (float32 fraction x size, converted to int); None when the region is off."""
+    if not render.use_border:
+        return None
+    w, h = (np.float32(v) for v in resolution)
+    return (int(np.float32(render.border_min_x) * w), int(np.float32(render.border_min_y) * h),
+            int(np.float32(render.border_max_x) * w), int(np.float32(render.border_max_y) * h))
+
+
+def _export_camera(depsgraph, scene, resolution, border, warn: _Warnings) -> Camera:
+    cam_obj = scene.camera
+    if cam_obj is None:
+        raise SceneError(f"Scene '{scene.name}' has no active camera: set one in the Scene "
+                         f"properties (Scene > Camera)")
+    if cam_obj.type != "CAMERA":
+        raise SceneError(f"Active camera '{cam_obj.name}' is {_article(cam_obj.type)} "
+                         f"{cam_obj.type.lower()} object, not a camera")
+    cam_eval = cam_obj.evaluated_get(depsgraph)
+    data = cam_eval.data
+    name = cam_obj.name
+    matrix = np.array(cam_eval.matrix_world, dtype=np.float64)
+    if not np.all(np.isfinite(matrix)):
+        raise SceneError(f"Camera '{name}': world matrix is not finite (NaN or infinite "
+                         f"location, rotation or scale)")
+    lengths = np.linalg.norm(matrix[:3, :3], axis=0)
+    if np.any(lengths < 1e-12):
+        raise SceneError(f"Camera '{name}': zero scale on an axis")
+    matrix[:3, :3] /= lengths          # as Matrix.normalized(): drop the scale
+
+    render = scene.render
+    if resolution is None:
+        resolution = render_resolution(render)
+    w, h = (int(v) for v in resolution)
+    if w < 1 or h < 1:
+        raise SceneError(f"Scene '{scene.name}': resolution {w}x{h} must be at least 1x1")
+    if border is None:
+        border = render_border(render, (w, h))
+
+    if data.type != "PERSP":
+        warn(f"Camera '{name}': {data.type.lower()} cameras are not supported; rendered as "
+             f"perspective with the same lens and sensor")
+    if getattr(getattr(data, "dof", None), "use_dof", False):
+        warn(f"Camera '{name}': depth of field is ignored")
+    lens = float(data.lens)
+    if not (lens > 0 and math.isfinite(lens)):
+        raise SceneError(f"Camera '{name}': focal length {lens} mm must be positive")
+
+    # Sensor fit (BKE_camera_params_compute_viewplane): frame size in pixels x pixel aspect.
+    fx = w * float(render.pixel_aspect_x)
+    fy = h * float(render.pixel_aspect_y)
+    fit = data.sensor_fit
+    if fit == "AUTO":
+        horizontal, sensor = fx >= fy, float(data.sensor_width)
+    elif fit == "HORIZONTAL":
+        horizontal, sensor = True, float(data.sensor_width)
+    else:
+        horizontal, sensor = False, float(data.sensor_height)
+    half = sensor / (2.0 * lens)
+    if horizontal:
+        tan_x, tan_y = half, half * fy / fx
+        unit = 2.0 * tan_x
+    else:
+        tan_x, tan_y = half * fx / fy, half
+        unit = 2.0 * tan_y
+    return Camera(matrix=matrix, tan_half_x=tan_x, tan_half_y=tan_y, resolution=(w, h),
+                  shift_x=float(data.shift_x) * unit, shift_y=float(data.shift_y) * unit,
+                  clip_start=float(data.clip_start), clip_end=float(data.clip_end),
+                  border=None if border is None else tuple(int(v) for v in border), name=name)
+
+
+# ---------------------------------------------------------------------------------------------
+# The scene
+# ---------------------------------------------------------------------------------------------
+def _visible(inst, obj) -> bool:
+    """Render visibility of one depsgraph instance.
+
+    The depsgraph's iterator already drops what it does not show in its mode (viewport or
+    render). A viewport depsgraph (tests, previews) still lists what a final render hides, so
+    the render rules are applied here too: Disable in Renders (hide_render), an instancer's
+    Show Instancer for Render, and the original of an object instanced on its parent's
+    vertices or faces (Blender hides it in renders)."""
+    if not inst.show_self:
+        return False
+    if inst.is_instance:
+        parent = inst.parent
+        return parent is None or not parent.original.hide_render
+    original = obj.original
+    if original.hide_render:
+        return False
+    if getattr(obj, "is_instancer", False) and not original.show_instancer_for_render:
+        return False
+    parent = original.parent
+    if parent is not None and parent.instance_type in ("VERTS", "FACES"):
+        return False
+    return True
+
+
+def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
+    """Export the evaluated ``depsgraph`` into a validated :class:`Scene` (see module doc)."""
+    t_start = time.perf_counter()
+    warn = _Warnings()
+    scene = depsgraph.scene
+    scene_eval = getattr(depsgraph, "scene_eval", scene)
+
+    camera = _export_camera(depsgraph, scene, resolution, border, warn)
+
+    materials: list[Material] = []
+    material_index: dict[int, int] = {}     # Blender material pointer -> index
+    default_id: list[int] = []              # index of the default grey, created on demand
+
+    def material_id(mat) -> int:
+        if mat is None:
+            if not default_id:
+                default_id.append(len(materials))
+                materials.append(Material("Default", diffuse=np.full(3, DEFAULT_DIFFUSE)))
+            return default_id[0]
+        key = getattr(mat, "original", mat).as_pointer()
+        if key not in material_index:
+            material_index[key] = len(materials)
+            materials.append(_convert_material(mat, warn))
+        return material_index[key]
+
+    object_names: list[str] = []
+    object_index: dict[str, int] = {}
+    mesh_cache: dict = {}
+    groups: dict = {}        # (object, mesh) -> _Group of instances
+    lights = []
+
+    mesh_parents: set = set()    # objects whose geometry arrived as MESH instances
+    curve_like = []              # non-mesh geometry objects, converted if no mesh arrived
+
+    def add_instance(obj, key, name, matrix):
+        """Queue one instance of the cached mesh ``key``; instances sharing a mesh and a
+        material mapping form one group, transformed together."""
+        if mesh_cache[key] is None:
+            return
+        group_key = (obj.original.as_pointer(), key)
+        group = groups.get(group_key)
+        if group is None:
+            slots = obj.material_slots
+            lut = np.array([material_id(s.material) for s in slots] if len(slots)
+                           else [material_id(None)], dtype=np.int32)
+            group = groups[group_key] = _Group(mesh_cache[key], lut)
+        group.matrices.append(matrix)
+        group.names.append(name)
+
+    # Walk the instances: one Python step per object or instance, never per triangle.
+    for inst in depsgraph.object_instances:
+        obj = inst.object
+        otype = obj.type
+        if otype not in GEOMETRY_TYPES and otype != "LIGHT":
+            if otype in UNSUPPORTED_TYPES:
+                warn(f"Object '{obj.name}': {otype.lower()} objects are not supported; skipped")
+            continue
+        if not _visible(inst, obj):
+            continue
+        name = obj.name
+        parent = inst.parent if inst.is_instance else None
+        if parent is not None and parent.name != obj.name:
+            name = f"{parent.name}/{obj.name}"
+        matrix = np.array(inst.matrix_world, np.float64)
+
+        if otype == "LIGHT":
+            light = _convert_light(name, obj.data, matrix, warn)
+            if light is not None:
+                lights.append(light)
+        elif otype == "MESH":
+            if parent is not None:
+                mesh_parents.add(parent.original.as_pointer())
+            key = ("mesh", obj.data.as_pointer())
+            if key not in mesh_cache:              # read once per mesh datablock
+                mesh_cache[key] = _read_mesh(obj.data)
+            add_instance(obj, key, name, matrix)
+        elif not inst.is_instance:
+            # Curves, surfaces, text and metaballs: Blender 3+ hands their evaluated mesh over
+            # as a MESH instance whose parent is the object itself; to_mesh() is the fallback.
+            curve_like.append((obj, name, matrix))
+
+    for obj, name, matrix in curve_like:
+        if obj.original.as_pointer() in mesh_parents:
+            continue
+        key = ("to_mesh", obj.original.as_pointer())
+        try:
+            mesh = obj.to_mesh()
+        except RuntimeError:
+            mesh = None
+        try:
+            mesh_cache[key] = _read_mesh(mesh) if mesh is not None else None
+        finally:
+            obj.to_mesh_clear()
+        add_instance(obj, key, name, matrix)
+
+    # Drop instances whose transform is not finite, naming them; number the objects.
+    for group in groups.values():
+        mats = np.array(group.matrices, np.float64).reshape(-1, 4, 4)
+        finite = np.all(np.isfinite(mats), axis=(1, 2))
+        for i in np.flatnonzero(~finite):
+            warn(f"Object '{group.names[i].rsplit('/', 1)[-1]}': world matrix is not finite "
+                 f"(NaN or infinite location, rotation or scale); its {group.data.count} "
+                 f"triangles are skipped")
+        ids = []
+        for name in (n for n, ok in zip(group.names, finite) if ok):
+            if name not in object_index:
+                object_index[name] = len(object_names)
+                object_names.append(name)
+            ids.append(object_index[name])
+        group.matrices = mats[finite]
+        group.object_ids = np.asarray(ids, np.int32)
+    n_instances = sum(len(g.matrices) for g in groups.values())
+
+    # Fill preallocated output arrays, one block of numpy work per group of instances.
+    total = sum(len(g.matrices) * g.data.count for g in groups.values())
+    triangles = np.empty((total, 3, 3), np.float32)
+    normals = np.empty((total, 3, 3), np.float32)
+    material_ids = np.empty(total, np.int32)
+    object_ids = np.empty(total, np.int32)
+    flat_tris = triangles.reshape(-1, 3)
+    flat_normals = normals.reshape(-1, 3)
+    start = 0
+    for group in groups.values():
+        data, n_tri = group.data, group.data.count
+        tri_mats = group.lut[np.clip(data.mat_index, 0, len(group.lut) - 1)]
+        # Chunks keep the temporary per-instance copies of the mesh near 4M rows.
+        rows = max(len(data.co), len(data.corner_normals), 1)
+        step = max(1, 4_000_000 // rows)
+        for c0 in range(0, len(group.matrices), step):
+            mats = group.matrices[c0:c0 + step]
+            n = len(mats)
+            end = start + n * n_tri
+            if n == 1 and np.array_equal(mats[0], np.eye(4)):
+                co, cn = data.co, data.corner_normals
+                vert_index, loop_index = data.tri_verts, data.tri_loops
+            else:
+                rot = mats[:, :3, :3]
+                co = np.matmul(data.co, rot.transpose(0, 2, 1).astype(np.float32))
+                co += mats[:, None, :3, 3].astype(np.float32)
+                cn = np.matmul(data.corner_normals,
+                               _normal_matrices(rot).transpose(0, 2, 1).astype(np.float32))
+                vert_index = (data.tri_verts[None, :]
+                              + (np.arange(n) * len(data.co))[:, None]).ravel()
+                loop_index = (data.tri_loops[None, :]
+                              + (np.arange(n) * len(data.corner_normals))[:, None]).ravel()
+            _gather_rows(co.reshape(-1, 3), vert_index, flat_tris[3 * start:3 * end])
+            _gather_rows(cn.reshape(-1, 3), loop_index, flat_normals[3 * start:3 * end])
+            material_ids[start:end].reshape(n, n_tri)[:] = tri_mats
+            object_ids[start:end] = np.repeat(group.object_ids[c0:c0 + step], n_tri)
+            start = end
+
+    world = _export_world(scene_eval.world, warn)
+    out = Scene(triangles=triangles, material_ids=material_ids, materials=materials,
+                camera=camera, shading_normals=normals, object_ids=object_ids,
+                object_names=object_names, lights=lights, world=world,
+                warnings=list(warn.messages))
+    out.validate()
+    out.warnings = list(dict.fromkeys(out.warnings))
+    out.stats.update({
+        "export_seconds": time.perf_counter() - t_start,
+        "triangles": int(len(out.triangles)),
+        "instances": n_instances,
+        "meshes_read": sum(1 for v in mesh_cache.values() if v is not None),
+        "lights": len(lights),
+        "materials": len(materials),
+    })
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# Settings
+# ---------------------------------------------------------------------------------------------
+def _find_setting(props, name: str, depth: int = 0):
+    """Look ``name`` up on ``props`` and then on its nested property groups."""
+    if props is None or depth > 3:
+        return None
+    rna = getattr(props, "bl_rna", None)
+    if rna is not None and name in rna.properties.keys():
+        return getattr(props, name)
+    if rna is None:
+        return getattr(props, name, None)
+    for prop in rna.properties:
+        if prop.type == "POINTER" and prop.identifier != "rna_type":
+            found = _find_setting(getattr(props, prop.identifier, None), name, depth + 1)
+            if found is not None:
+                return found
+    return None
+
+
+def export_settings(blender_scene) -> RenderSettings:
+    """``Scene.lanterna`` -> :class:`RenderSettings`; missing fields keep the class defaults,
+    except ``threads`` whose 0 (or absence) means ``os.cpu_count()``."""
+    props = getattr(blender_scene, "lanterna", None)
+    values = {}
+    for f in dataclasses.fields(RenderSettings):
+        value = _find_setting(props, f.name)
+        if value is None:
+            continue
+        default = getattr(RenderSettings(), f.name)
+        try:
+            values[f.name] = type(default)(value) if isinstance(default, (int, float, bool)) \
+                else value
+        except (TypeError, ValueError):
+            raise SceneError(f"Render setting '{f.name}' has an invalid value {value!r}")
+    threads = int(values.get("threads", 0))
+    values["threads"] = threads if threads > 0 else (os.cpu_count() or 1)
+    if "samples" in values:
+        values["samples"] = max(1, values["samples"])
+    for key in ("light_samples", "bounces"):
+        if key in values:
+            values[key] = max(0, values[key])
+    return RenderSettings(**values)
+
+
+# ---------------------------------------------------------------------------------------------
+# Benchmark
+# ---------------------------------------------------------------------------------------------
+def _grid_mesh(name: str, n_triangles: int):
+    """A flat grid of about ``n_triangles`` triangles built with foreach_set (fast)."""
+    n = max(1, int(math.ceil(math.sqrt(n_triangles / 2.0))))        # quads per side
+    xs = np.linspace(-1.0, 1.0, n + 1, dtype=np.float32)
+    gx, gy = np.meshgrid(xs, xs, indexing="xy")
+    co = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size, np.float32)], axis=1)
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="xy")
+    v0 = (j * (n + 1) + i).ravel()
+    quads = np.stack([v0, v0 + 1, v0 + n + 2, v0 + n + 1], axis=1).astype(np.int32)
+    mesh = bpy.data.meshes.new(name)
+    mesh.vertices.add(len(co))
+    mesh.vertices.foreach_set("co", co.ravel())
+    mesh.loops.add(quads.size)
+    mesh.loops.foreach_set("vertex_index", quads.ravel())
+    mesh.polygons.add(len(quads))
+    mesh.polygons.foreach_set("loop_start", np.arange(0, quads.size, 4, dtype=np.int32))
+    mesh.update()
+    return mesh
+
+
+def benchmark_export(n_triangles: int = 1_000_000) -> dict:
+    """Build a grid of about ``n_triangles`` triangles in a fresh Blender scene, export it and
+    return {'triangles', 'seconds' (export_scene wall time), 'build_seconds'}. Resets the
+    current Blender session (factory settings)."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    t0 = time.perf_counter()
+    scene = bpy.context.scene
+    mesh = _grid_mesh("Benchmark", n_triangles)
+    obj = bpy.data.objects.new("Benchmark", mesh)
+    obj.rotation_euler = (0.3, 0.2, 0.1)
+    scene.collection.objects.link(obj)
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    cam.location = (0.0, 0.0, 5.0)
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    build = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    exported = export_scene(depsgraph)
+    seconds = time.perf_counter() - t0
+    return {"triangles": int(len(exported.triangles)), "seconds": seconds,
+            "build_seconds": build}

@@ -1,0 +1,606 @@
+"""Tests of engine/blender/export.py: Blender scenes built in code -> Scene, checked by numbers."""
+import math
+import os
+import types
+
+import bpy
+import numpy as np
+import pytest
+from bpy_extras.object_utils import world_to_camera_view
+from mathutils import Matrix, Vector
+
+from lanterna.engine.blender.export import export_scene, export_settings
+from lanterna.engine.pipeline import RenderSettings
+from lanterna.engine.scene import AreaLight, PointLight, SceneError, SpotLight, SunLight
+
+
+# ---------------------------------------------------------------------------------------------
+# Helpers
+# ---------------------------------------------------------------------------------------------
+def reset():
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    return bpy.context.scene
+
+
+def add_camera(scene, location=(0.0, -10.0, 0.0), rotation=(math.pi / 2, 0.0, 0.0)):
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    cam.location = location
+    cam.rotation_euler = rotation
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    return cam
+
+
+def add_cube(scene, name="Cube", size=2.0, mesh=None):
+    if mesh is None:
+        bpy.ops.mesh.primitive_cube_add(size=size)
+        obj = bpy.context.object
+        obj.name = name
+        return obj
+    obj = bpy.data.objects.new(name, mesh)
+    scene.collection.objects.link(obj)
+    return obj
+
+
+def export():
+    return export_scene(bpy.context.evaluated_depsgraph_get())
+
+
+def cube_corners(half=1.0):
+    return np.array([[x, y, z] for x in (-half, half) for y in (-half, half) for z in (-half, half)])
+
+
+def unique_rows(points, decimals=4):
+    return np.unique(np.round(np.asarray(points, float).reshape(-1, 3), decimals), axis=0)
+
+
+def new_material(name):
+    mat = bpy.data.materials.new(name)
+    if bpy.app.version < (5, 0, 0):  # always True (and deprecated) in Blender 5
+        mat.use_nodes = True
+    return mat
+
+
+def principled(mat):
+    return next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
+
+
+def set_surface(mat, node):
+    out = next(n for n in mat.node_tree.nodes if n.type == "OUTPUT_MATERIAL")
+    mat.node_tree.links.new(node.outputs[0], out.inputs["Surface"])
+
+
+def material_of(scene, name):
+    return next(m for m in scene.materials if m.name == name)
+
+
+# ---------------------------------------------------------------------------------------------
+# Geometry
+# ---------------------------------------------------------------------------------------------
+def test_transformed_cube_positions_and_normals():
+    scene = reset()
+    add_camera(scene)
+    cube = add_cube(scene)
+    # Tilt the mesh itself so that the object's non-uniform scale shears the face normals.
+    tilt = Matrix.Rotation(0.4, 4, "Z") @ Matrix.Rotation(0.3, 4, "X")
+    cube.data.transform(tilt)
+    cube.location = (1.0, 2.0, 3.0)
+    cube.rotation_euler = (0.3, 0.5, 0.7)
+    cube.scale = (1.0, 2.0, 0.5)
+    s = export()
+    assert s.triangles.shape == (12, 3, 3) and s.triangles.dtype == np.float32
+    assert s.shading_normals.shape == (12, 3, 3) and s.shading_normals.dtype == np.float32
+    assert s.material_ids.dtype == np.int32 and s.object_ids.dtype == np.int32
+    assert s.object_names == ["Cube"]
+
+    m = np.array(cube.matrix_world) @ np.array(tilt)
+    expected = cube_corners() @ m[:3, :3].T + m[:3, 3]
+    np.testing.assert_allclose(unique_rows(s.triangles), unique_rows(expected), atol=1e-4)
+    # Every triangle lies on one face of the cube: one local coordinate is +-1 on all corners.
+    local = (s.triangles.reshape(-1, 3) - m[:3, 3]) @ np.linalg.inv(m[:3, :3]).T
+    local = local.reshape(12, 3, 3)
+    on_face = np.any(np.all(np.abs(np.abs(local) - 1.0) < 1e-5, axis=1)
+                     & (np.ptp(local, axis=1) < 1e-5), axis=1)
+    assert on_face.all()
+    # Shading normals (non-uniform scale): unit, perpendicular to the face, pointing outwards.
+    n = s.shading_normals.astype(float)
+    np.testing.assert_allclose(np.linalg.norm(n, axis=2), 1.0, atol=1e-5)
+    edges = s.triangles[:, 1] - s.triangles[:, 0], s.triangles[:, 2] - s.triangles[:, 0]
+    for e in edges:
+        assert np.max(np.abs(np.einsum("tij,tj->ti", n, e))) < 1e-4
+    outward = np.einsum("tij,tj->ti", n, s.triangles.mean(axis=1) - m[:3, 3])
+    assert np.all(outward > 0)
+
+
+def test_linked_duplicates_and_collection_instance_read_mesh_once():
+    scene = reset()
+    add_camera(scene)
+    a = add_cube(scene, "A")
+    mesh = a.data
+    b = add_cube(scene, "B", mesh=mesh)
+    b.location = (5.0, 0.0, 0.0)
+    source = bpy.data.collections.new("Source")
+    source.objects.link(bpy.data.objects.new("Src", mesh))   # not in the scene itself
+    inst = bpy.data.objects.new("Inst", None)
+    inst.instance_type = "COLLECTION"
+    inst.instance_collection = source
+    inst.location = (0.0, 0.0, 10.0)
+    inst.scale = (2.0, 2.0, 2.0)
+    scene.collection.objects.link(inst)
+    s = export()
+    assert len(s.triangles) == 36
+    assert s.stats["meshes_read"] == 1
+    assert sorted(s.object_names) == ["A", "B", "Inst/Src"]
+    corners = cube_corners()
+    for name, expected in (("A", corners), ("B", corners + [5.0, 0, 0]),
+                           ("Inst/Src", 2.0 * corners + [0, 0, 10.0])):
+        tris = s.triangles[s.object_ids == s.object_names.index(name)]
+        assert len(tris) == 12
+        np.testing.assert_allclose(unique_rows(tris), unique_rows(expected), atol=1e-5)
+
+
+def test_vertex_instancing_many_copies():
+    scene = reset()
+    add_camera(scene)
+    child = add_cube(scene, "Child", size=0.2)
+    points = bpy.data.meshes.new("Points")
+    positions = [(float(i), float(i % 3), 0.0) for i in range(40)]
+    points.from_pydata(positions, [], [])
+    parent = bpy.data.objects.new("Parent", points)
+    scene.collection.objects.link(parent)
+    child.parent = parent
+    parent.instance_type = "VERTS"
+    s = export()
+    # 40 copies; the original child and the (face-less) parent are not rendered.
+    assert len(s.triangles) == 40 * 12
+    assert s.stats["meshes_read"] == 1
+    centres = unique_rows(s.triangles.reshape(40, 12 * 3, 3).mean(axis=1))
+    np.testing.assert_allclose(centres, unique_rows(positions), atol=1e-5)
+
+
+def test_subdivision_modifier_is_applied():
+    scene = reset()
+    add_camera(scene)
+    cube = add_cube(scene)
+    mod = cube.modifiers.new("Subdivision", "SUBSURF")
+    mod.levels = 2
+    s = export()
+    assert len(s.triangles) == 6 * 16 * 2          # 96 quads
+    radius = np.linalg.norm(s.triangles.reshape(-1, 3), axis=1)
+    assert radius.max() < math.sqrt(3) - 0.1        # the corners were smoothed in
+    mod.levels = 1
+    assert len(export().triangles) == 6 * 4 * 2
+
+
+def test_hidden_in_render_is_skipped_and_curve_is_triangulated():
+    scene = reset()
+    add_camera(scene)
+    add_cube(scene, "Shown")
+    hidden = add_cube(scene, "Hidden")
+    hidden.hide_render = True
+    bpy.ops.curve.primitive_bezier_circle_add()
+    circle = bpy.context.object
+    circle.data.dimensions = "2D"
+    circle.data.fill_mode = "BOTH"
+    red = new_material("Red")
+    circle.data.materials.append(red)
+    circle.location = (0.0, 0.0, 2.0)
+    dg = bpy.context.evaluated_depsgraph_get()
+    circle_eval = circle.evaluated_get(dg)
+    expected = len(circle_eval.to_mesh().loop_triangles)
+    circle_eval.to_mesh_clear()
+    s = export_scene(dg)
+    assert "Hidden" not in s.object_names
+    mine = s.object_ids == s.object_names.index(circle.name)
+    # Exactly once: Blender 5 lists the curve object and its mesh (as an instance).
+    assert expected > 10 and mine.sum() == expected
+    np.testing.assert_allclose(s.triangles[mine][..., 2], 2.0, atol=1e-6)   # a flat disc
+    assert np.all(s.material_ids[mine] == s.materials.index(material_of(s, "Red")))
+    assert np.sum(s.object_ids == s.object_names.index("Shown")) == 12
+
+
+def test_nan_location_skips_object_with_warning():
+    scene = reset()
+    add_camera(scene)
+    add_cube(scene, "Good")
+    bad = add_cube(scene, "Broken")
+    bad.location = (float("nan"), 0.0, 0.0)
+    s = export()
+    assert len(s.triangles) == 12
+    assert s.object_names == ["Good"]
+    assert np.all(np.isfinite(s.triangles))
+    msgs = [w for w in s.warnings if "'Broken'" in w]
+    assert len(msgs) == 1 and "not finite" in msgs[0] and "12 triangles" in msgs[0]
+
+
+# ---------------------------------------------------------------------------------------------
+# Materials
+# ---------------------------------------------------------------------------------------------
+def test_principled_material_values():
+    scene = reset()
+    add_camera(scene)
+    cube = add_cube(scene)
+    mat = new_material("Paint")
+    p = principled(mat)
+    p.inputs["Base Color"].default_value = (0.5, 0.4, 0.3, 1.0)
+    p.inputs["Metallic"].default_value = 0.25
+    p.inputs["Roughness"].default_value = 0.0
+    p.inputs["Emission Color"].default_value = (1.0, 0.5, 0.25, 1.0)
+    p.inputs["Emission Strength"].default_value = 3.0
+    cube.data.materials.append(mat)
+    s = export()
+    m = material_of(s, "Paint")
+    base = np.array([0.5, 0.4, 0.3])
+    np.testing.assert_allclose(m.diffuse, base * 0.75, rtol=1e-6)
+    np.testing.assert_allclose(m.specular, base * 0.25, rtol=1e-6)
+    np.testing.assert_allclose(m.exitance, math.pi * 3.0 * np.array([1.0, 0.5, 0.25]), rtol=1e-6)
+    assert m.emit_both_sides
+    assert np.all(s.material_ids == s.materials.index(m))
+
+
+def test_default_principled_is_not_emissive_and_no_material_is_grey():
+    scene = reset()
+    add_camera(scene)
+    plain = add_cube(scene, "Plain")
+    painted = add_cube(scene, "Painted")
+    painted.data.materials.append(new_material("Fresh"))
+    s = export()
+    fresh = material_of(s, "Fresh")
+    np.testing.assert_allclose(fresh.diffuse, 0.8, rtol=1e-6)     # Base Color default
+    np.testing.assert_allclose(fresh.exitance, 0.0)                # Emission Strength 0
+    default = material_of(s, "Default")
+    np.testing.assert_allclose(default.diffuse, 0.8)
+    np.testing.assert_allclose(default.specular, 0.0)
+    plain_ids = s.material_ids[s.object_ids == s.object_names.index(plain.name)]
+    assert np.all(plain_ids == s.materials.index(default))
+
+
+def test_diffuse_emission_mix_and_add_shaders():
+    scene = reset()
+    add_camera(scene)
+    specs = {}
+
+    mat = new_material("Matte")
+    node = mat.node_tree.nodes.new("ShaderNodeBsdfDiffuse")
+    node.inputs["Color"].default_value = (0.2, 0.6, 0.9, 1.0)
+    set_surface(mat, node)
+    specs["Matte"] = ([0.2, 0.6, 0.9], [0, 0, 0], [0, 0, 0])
+
+    mat2 = new_material("Lamp")
+    node = mat2.node_tree.nodes.new("ShaderNodeEmission")
+    node.inputs["Color"].default_value = (1.0, 1.0, 0.5, 1.0)
+    node.inputs["Strength"].default_value = 2.0
+    set_surface(mat2, node)
+    specs["Lamp"] = ([0, 0, 0], [0, 0, 0], [2 * math.pi, 2 * math.pi, math.pi])
+
+    mat3 = new_material("Mixed")
+    tree = mat3.node_tree
+    diff = tree.nodes.new("ShaderNodeBsdfDiffuse")
+    diff.inputs["Color"].default_value = (1.0, 0.0, 0.0, 1.0)
+    glossy = tree.nodes.new("ShaderNodeBsdfGlossy")
+    glossy.inputs["Color"].default_value = (0.0, 0.0, 0.8, 1.0)
+    glossy.inputs["Roughness"].default_value = 0.0
+    mix = tree.nodes.new("ShaderNodeMixShader")
+    mix.inputs["Fac"].default_value = 0.25
+    tree.links.new(diff.outputs[0], mix.inputs[1])
+    tree.links.new(glossy.outputs[0], mix.inputs[2])
+    set_surface(mat3, mix)
+    specs["Mixed"] = ([0.75, 0, 0], [0, 0, 0.2], [0, 0, 0])
+
+    mat4 = new_material("TooBright")
+    tree = mat4.node_tree
+    diff = tree.nodes.new("ShaderNodeBsdfDiffuse")
+    diff.inputs["Color"].default_value = (0.8, 0.8, 0.8, 1.0)
+    glossy = tree.nodes.new("ShaderNodeBsdfGlossy")
+    glossy.inputs["Color"].default_value = (0.6, 0.6, 0.0, 1.0)
+    glossy.inputs["Roughness"].default_value = 0.0
+    add = tree.nodes.new("ShaderNodeAddShader")
+    tree.links.new(diff.outputs[0], add.inputs[0])
+    tree.links.new(glossy.outputs[0], add.inputs[1])
+    set_surface(mat4, add)
+    specs["TooBright"] = ([0.8 / 1.4, 0.8 / 1.4, 0.8], [0.6 / 1.4, 0.6 / 1.4, 0.0], [0, 0, 0])
+
+    for i, m in enumerate((mat, mat2, mat3, mat4)):
+        obj = add_cube(scene, f"Obj{i}")
+        obj.data.materials.append(m)
+    s = export()
+    for name, (d, sp, e) in specs.items():
+        m = material_of(s, name)
+        np.testing.assert_allclose(m.diffuse, d, rtol=1e-6, atol=1e-7, err_msg=name)
+        np.testing.assert_allclose(m.specular, sp, rtol=1e-6, atol=1e-7, err_msg=name)
+        np.testing.assert_allclose(m.exitance, e, rtol=1e-6, atol=1e-7, err_msg=name)
+    assert np.all(material_of(s, "TooBright").diffuse + material_of(s, "TooBright").specular
+                  <= 1.0 + 1e-9)
+    assert sum("'TooBright'" in w and "exceeds 1" in w for w in s.warnings) == 1
+
+
+def test_texture_gives_one_warning_and_default_colour():
+    scene = reset()
+    add_camera(scene)
+    mat = new_material("Wood")
+    p = principled(mat)
+    p.inputs["Base Color"].default_value = (0.3, 0.2, 0.1, 1.0)
+    tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+    mat.node_tree.links.new(tex.outputs["Color"], p.inputs["Base Color"])
+    for name in ("Plank1", "Plank2", "Plank3"):
+        add_cube(scene, name).data.materials.append(mat)
+    s = export()
+    wood = [w for w in s.warnings if "Wood" in w]
+    assert len(wood) == 1
+    assert "Material 'Wood'" in wood[0] and "Base Color" in wood[0] and "Image Texture" in wood[0]
+    np.testing.assert_allclose(material_of(s, "Wood").diffuse, [0.3, 0.2, 0.1], rtol=1e-6)
+    assert len(s.materials) == 1
+
+
+def test_material_slots_map_per_face():
+    scene = reset()
+    add_camera(scene)
+    cube = add_cube(scene)
+    red, blue = new_material("Red"), new_material("Blue")
+    principled(red).inputs["Base Color"].default_value = (1, 0, 0, 1)
+    principled(blue).inputs["Base Color"].default_value = (0, 0, 1, 1)
+    cube.data.materials.append(red)
+    cube.data.materials.append(blue)
+    z = np.array([p.center.z for p in cube.data.polygons])
+    idx = (z > 0.5).astype(np.int32)            # the top face uses slot 1
+    cube.data.polygons.foreach_set("material_index", idx)
+    cube.data.update()
+    s = export()
+    top = s.triangles[:, :, 2].min(axis=1) > 0.99
+    assert top.sum() == 2
+    assert np.all(s.material_ids[top] == s.materials.index(material_of(s, "Blue")))
+    assert np.all(s.material_ids[~top] == s.materials.index(material_of(s, "Red")))
+
+
+def test_lanterna_material_properties_override_nodes():
+    created = False
+    if not hasattr(bpy.types.Material, "lanterna"):
+        class TestMaterialProps(bpy.types.PropertyGroup):
+            derive_from_nodes: bpy.props.BoolProperty(default=True)
+            diffuse: bpy.props.FloatVectorProperty(size=3, default=(0.8, 0.8, 0.8))
+            specular: bpy.props.FloatVectorProperty(size=3, default=(0.0, 0.0, 0.0))
+            exitance: bpy.props.FloatVectorProperty(size=3, default=(0.0, 0.0, 0.0))
+        bpy.utils.register_class(TestMaterialProps)
+        bpy.types.Material.lanterna = bpy.props.PointerProperty(type=TestMaterialProps)
+        created = True
+    try:
+        scene = reset()
+        add_camera(scene)
+        mat = new_material("Manual")
+        mat.lanterna.derive_from_nodes = False
+        mat.lanterna.diffuse = (0.1, 0.2, 0.3)
+        mat.lanterna.specular = (0.4, 0.3, 0.2)
+        mat.lanterna.exitance = (5.0, 6.0, 7.0)
+        add_cube(scene).data.materials.append(mat)
+        m = material_of(export(), "Manual")
+        np.testing.assert_allclose(m.diffuse, [0.1, 0.2, 0.3], rtol=1e-6)
+        np.testing.assert_allclose(m.specular, [0.4, 0.3, 0.2], rtol=1e-6)
+        np.testing.assert_allclose(m.exitance, [5.0, 6.0, 7.0], rtol=1e-6)
+        mat.lanterna.derive_from_nodes = True
+        mat.update_tag()            # a viewport depsgraph re-evaluates only tagged IDs
+        np.testing.assert_allclose(material_of(export(), "Manual").diffuse, 0.8, rtol=1e-6)
+    finally:
+        if created:
+            del bpy.types.Material.lanterna
+            bpy.utils.unregister_class(TestMaterialProps)
+
+
+# ---------------------------------------------------------------------------------------------
+# Lights and world
+# ---------------------------------------------------------------------------------------------
+def add_light(scene, name, kind, location=(0.0, 0.0, 0.0), rotation=(0.0, 0.0, 0.0)):
+    light = bpy.data.lights.new(name, kind)
+    obj = bpy.data.objects.new(name, light)
+    obj.location = location
+    obj.rotation_euler = rotation
+    scene.collection.objects.link(obj)
+    return light, obj
+
+
+def test_light_conversion():
+    scene = reset()
+    add_camera(scene)
+    point, _ = add_light(scene, "Point", "POINT", location=(1.0, 2.0, 3.0))
+    point.energy = 100.0
+    point.color = (1.0, 0.5, 0.25)
+    point.shadow_soft_size = 0.0
+
+    spot, _ = add_light(scene, "Spot", "SPOT", location=(0, 0, 4), rotation=(math.pi / 2, 0, 0))
+    spot.energy = 40.0
+    spot.spot_size = 1.0
+    spot.spot_blend = 0.3
+    spot.shadow_soft_size = 0.1
+    spot.exposure = 1.0                         # x 2
+
+    sun, _ = add_light(scene, "Sun", "SUN", rotation=(0.0, math.pi / 2, 0.0))
+    sun.energy = 3.0
+    sun.angle = 0.1
+    sun.color = (0.5, 1.0, 1.0)
+
+    area, area_obj = add_light(scene, "Area", "AREA", location=(0, 0, 2))
+    area.shape = "RECTANGLE"
+    area.size = 2.0
+    area.size_y = 0.5
+    area.energy = 50.0
+    area.spread = 0.0
+    area_obj.scale = (1.0, 2.0, 1.0)
+
+    disk, _ = add_light(scene, "Disk", "AREA", location=(0, 0, 3))
+    disk.shape = "DISK"
+    disk.size = 1.0
+    disk.energy = 10.0
+    disk.spread = math.radians(90)
+    disk.normalize = False
+
+    dark, _ = add_light(scene, "Dark", "POINT")
+    dark.energy = 0.0
+
+    s = export()
+    lights = {l.name: l for l in s.lights}
+    assert set(lights) == {"Point", "Spot", "Sun", "Area", "Disk"}
+
+    p = lights["Point"]
+    assert isinstance(p, PointLight)
+    np.testing.assert_allclose(p.position, [1, 2, 3], atol=1e-6)
+    np.testing.assert_allclose(p.flux, [100, 50, 25], rtol=1e-6)
+    assert not any("'Point'" in w for w in s.warnings)
+
+    sp = lights["Spot"]
+    assert isinstance(sp, SpotLight)
+    np.testing.assert_allclose(sp.direction, [0, 1, 0], atol=1e-6)   # -Z turned by X 90 deg
+    np.testing.assert_allclose(sp.position, [0, 0, 4], atol=1e-6)
+    np.testing.assert_allclose(sp.flux, 80.0, rtol=1e-6)
+    assert sp.half_angle == pytest.approx(0.5, rel=1e-6)
+    assert sp.blend == pytest.approx(0.3, rel=1e-6)
+    assert any("'Spot'" in w and "radius" in w for w in s.warnings)
+
+    su = lights["Sun"]
+    assert isinstance(su, SunLight)
+    np.testing.assert_allclose(su.direction, [-1, 0, 0], atol=1e-6)  # -Z turned by Y 90 deg
+    np.testing.assert_allclose(su.irradiance, [1.5, 3.0, 3.0], rtol=1e-6)
+    assert su.angle == pytest.approx(0.1, rel=1e-6)
+
+    ar = lights["Area"]
+    assert isinstance(ar, AreaLight)
+    assert ar.shape == "RECTANGLE" and ar.collimated
+    assert (ar.size_x, ar.size_y) == pytest.approx((2.0, 0.5))
+    np.testing.assert_allclose(ar.power, 50.0, rtol=1e-6)
+    assert ar.area == pytest.approx(2.0 * 0.5 * 2.0, rel=1e-6)   # object scale applied
+    np.testing.assert_allclose(ar.normal, [0, 0, -1], atol=1e-6)
+    np.testing.assert_allclose(ar.center, [0, 0, 2], atol=1e-6)
+
+    dk = lights["Disk"]
+    assert dk.shape == "DISK" and not dk.collimated
+    # Normalize off: Power is per square metre of the light.
+    np.testing.assert_allclose(dk.power, 10.0 * math.pi * 0.25, rtol=1e-6)
+    assert any("'Disk'" in w and "Spread 90" in w for w in s.warnings)
+
+
+def test_world_colour():
+    scene = reset()
+    add_camera(scene)
+    assert export().world.is_black                 # no world
+    world = bpy.data.worlds.new("World")            # Blender 5: Background node, grey 0.05
+    scene.world = world
+    np.testing.assert_allclose(export().world.radiance, 0.05, rtol=1e-6)
+    bg = next(n for n in world.node_tree.nodes if n.type == "BACKGROUND")
+    bg.inputs["Color"].default_value = (0.2, 0.4, 0.6, 1.0)
+    bg.inputs["Strength"].default_value = 2.0
+    np.testing.assert_allclose(export().world.radiance, [0.4, 0.8, 1.2], rtol=1e-6)
+    sky = world.node_tree.nodes.new("ShaderNodeTexSky")
+    world.node_tree.links.new(sky.outputs[0], bg.inputs["Color"])
+    s = export()
+    np.testing.assert_allclose(s.world.radiance, [0.4, 0.8, 1.2], rtol=1e-6)
+    assert sum("World 'World'" in w and "Sky Texture" in w for w in s.warnings) == 1
+
+
+# ---------------------------------------------------------------------------------------------
+# Camera
+# ---------------------------------------------------------------------------------------------
+def project(camera, points):
+    """Frame coordinates (0..1, y up) of world points through the exported camera."""
+    inv = np.linalg.inv(camera.matrix)
+    pc = np.c_[points, np.ones(len(points))] @ inv.T
+    x, y = pc[:, 0] / -pc[:, 2], pc[:, 1] / -pc[:, 2]
+    u = ((x - camera.shift_x) / camera.tan_half_x + 1) / 2
+    v = ((y - camera.shift_y) / camera.tan_half_y + 1) / 2
+    return np.c_[u, v]
+
+
+@pytest.mark.parametrize("res, fit, aspect", [
+    ((1920, 1080), "AUTO", (1.0, 1.0)),
+    ((800, 1200), "AUTO", (1.0, 1.0)),
+    ((800, 1200), "HORIZONTAL", (1.0, 1.0)),
+    ((1920, 1080), "VERTICAL", (1.0, 1.0)),
+    ((640, 480), "AUTO", (1.0, 2.0)),             # non-square pixels: taller than wide
+    ((640, 480), "VERTICAL", (3.0, 2.0)),
+])
+def test_camera_matches_world_to_camera_view(res, fit, aspect):
+    scene = reset()
+    cam = add_camera(scene, location=(1.0, -8.0, 3.0), rotation=(1.2, 0.1, 0.3))
+    cam.scale = (1.5, 1.5, 1.5)                     # ignored by Blender's projection
+    cam.data.lens = 35.0
+    cam.data.sensor_width = 36.0
+    cam.data.sensor_height = 20.0
+    cam.data.sensor_fit = fit
+    cam.data.shift_x = 0.2
+    cam.data.shift_y = -0.15
+    scene.render.resolution_x, scene.render.resolution_y = res
+    scene.render.resolution_percentage = 50
+    scene.render.pixel_aspect_x, scene.render.pixel_aspect_y = aspect
+    s = export()
+    c = s.camera
+    assert c.resolution == (res[0] // 2, res[1] // 2)
+    assert c.clip_start == pytest.approx(cam.data.clip_start)
+    assert c.clip_end == pytest.approx(cam.data.clip_end)
+    rng = np.random.default_rng(1)
+    cam_m = np.array(cam.matrix_world.normalized())
+    local = np.c_[rng.uniform(-3, 3, (20, 2)), rng.uniform(-9, -2, 20)]
+    points = local @ cam_m[:3, :3].T + cam_m[:3, 3]
+    ours = project(c, points)
+    theirs = np.array([world_to_camera_view(scene, cam, Vector(p))[:2] for p in points])
+    np.testing.assert_allclose(ours, theirs, atol=1e-5)
+    assert np.ptp(theirs[:, 0]) > 0.5               # the points spread over the frame
+
+
+def test_border_and_resolution_override():
+    scene = reset()
+    add_camera(scene)
+    r = scene.render
+    r.resolution_x, r.resolution_y, r.resolution_percentage = 640, 480, 50
+    assert export().camera.border == (0, 0, 320, 240)
+    r.use_border = True
+    r.border_min_x, r.border_max_x = 0.127, 0.803
+    r.border_min_y, r.border_max_y = 0.2049, 0.9
+    # Blender truncates: 40.64 -> 40, 256.96 -> 256, 49.18 -> 49, 216 (checked against a
+    # cropped Cycles render of this setup: 216 x 167 pixels).
+    assert export().camera.border == (40, 49, 256, 216)
+    dg = bpy.context.evaluated_depsgraph_get()
+    c = export_scene(dg, resolution=(100, 50)).camera
+    assert c.resolution == (100, 50) and c.border == (12, 10, 80, 45)
+    c = export_scene(dg, resolution=(100, 50), border=(5, 6, 70, 40)).camera
+    assert c.border == (5, 6, 70, 40) and c.window_size == (65, 34)
+
+
+def test_missing_camera_raises():
+    scene = reset()
+    add_cube(scene)
+    with pytest.raises(SceneError, match="no active camera"):
+        export()
+    cam = add_camera(scene)
+    cam.location = (0.0, float("nan"), 0.0)
+    with pytest.raises(SceneError, match="Camera 'Camera'.*not finite"):
+        export()
+
+
+# ---------------------------------------------------------------------------------------------
+# Settings
+# ---------------------------------------------------------------------------------------------
+def test_export_settings():
+    scene = reset()
+    if not hasattr(bpy.types.Scene, "lanterna"):
+        defaults = export_settings(scene)
+        assert defaults.samples == RenderSettings.samples
+        assert defaults.light_samples == RenderSettings.light_samples
+        assert defaults.bounces == RenderSettings.bounces
+        assert defaults.threads == os.cpu_count()
+    fake = types.SimpleNamespace(lanterna=types.SimpleNamespace(
+        samples=64, light_samples=8, bounces=3, seed=7, threads=0))
+    st = export_settings(fake)
+    assert (st.samples, st.light_samples, st.bounces, st.seed) == (64, 8, 3, 7)
+    assert st.threads == os.cpu_count()
+    fake.lanterna.threads = 1
+    assert export_settings(fake).threads == 1
+
+
+def test_mirrored_object_keeps_outward_normals():
+    scene = reset()
+    add_camera(scene)
+    cube = add_cube(scene)
+    cube.scale = (-1.0, 2.0, 1.0)
+    s = export()
+    assert len(s.triangles) == 12
+    outward = np.einsum("tij,tj->ti", s.shading_normals.astype(float), s.triangles.mean(axis=1))
+    assert np.all(outward > 0)
+    np.testing.assert_allclose(unique_rows(s.triangles),
+                               unique_rows(cube_corners() * [1.0, 2.0, 1.0]), atol=1e-6)
