@@ -111,11 +111,12 @@ def direct_irradiance(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng
     traced = time.perf_counter() - t0
 
     # Accumulate weight x rgb per light group for the rays that got through.
+    visible = ~blocked
+    visible &= far > 0
     offset = 0
     for tgt, group in zip(targets, groups):
         size = len(tgt)
-        weight = np.where(blocked[offset:offset + size] | (far[offset:offset + size] <= 0), 0.0,
-                          group[3])
+        weight = group[3] * visible[offset:offset + size]
         offset += size
         scalar = weight if group[0] is None else np.bincount(tgt, weights=weight, minlength=count)
         irradiance += scalar[:, None] * np.asarray(group[4], np.float64)[None]

@@ -181,7 +181,11 @@ def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArr
             e *= arrays.diffuse_over_pi[mat[idx]]
             if depth > 0:
                 e *= thr[idx]
-            radiance[rays[idx]] += e
+                radiance[rays[idx]] += e
+            elif isinstance(idx, slice) and len(rays) == count:
+                radiance += e
+            else:
+                radiance[rays[idx]] += e
 
         if not arrays.has_specular or depth == settings.max_specular_depth:
             break

@@ -15,7 +15,8 @@ Seed equations and corrections
     alpha = 1 - sqrt(xi1), beta = xi2 sqrt(xi1) is uniform over the triangle.
     Cosine hemisphere (Eq. 8.4-8.6, 9.5): Malley's method through the concentric disk map
     (Shirley and Chiu 1997). Orthonormal basis: Duff et al. 2017, "Building an Orthonormal
-    Basis, Revisited". Filter: Blackman-Harris of width 1.5 px like Cycles' default, sampled
+    Basis, Revisited". Filter: Blackman-Harris with Cycles' meaning of its width (default
+    1.5 px: the window spans [-1.5, 1.5] px, measured against Cycles' edge profile), sampled
     separably in x and y through a tabulated inverse CDF (Cycles' filter table).
 """
 from __future__ import annotations
@@ -43,7 +44,8 @@ def stratified_2d(groups: int, count: int, rng: np.random.Generator,
     order per group when ``shuffle`` (needed when the sample index pairs these numbers with
     other dimensions); otherwise a Latin hypercube (stratified in each axis).
     """
-    u = rng.random((groups, count, 2), dtype=np.float64)
+    u = rng.random((groups, count, 2), dtype=np.float32).astype(np.float64, copy=False) \
+        if shuffle else rng.random((groups, count, 2), dtype=np.float32)
     side = int(round(np.sqrt(count)))
     if side * side == count and count > 1:
         cells = (np.argsort(rng.random((groups, count)), axis=1) if shuffle
@@ -121,7 +123,7 @@ def _blackman_harris_inverse_cdf(width: float, table_size: int = 4096) -> np.nda
               - 0.01168 * np.cos(6 * np.pi * x))
     cdf = np.concatenate([[0.0], np.cumsum(0.5 * (window[1:] + window[:-1]))])
     cdf /= cdf[-1]
-    offsets = (x - 0.5) * width
+    offsets = (x - 0.5) * 2.0 * width    # Cycles' Blackman-Harris spans [-width, width]
     # Value at the centre of each of table_size equal-probability bins.
     return np.interp((np.arange(table_size) + 0.5) / table_size, cdf, offsets).astype(np.float32)
 
