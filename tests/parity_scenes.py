@@ -1,0 +1,305 @@
+"""Small bpy scenes, built by code, for direct-light parity with Cycles.
+
+Every builder starts from ``bpy.ops.wm.read_factory_settings(use_empty=True)`` and makes the
+same set: a floor, a back wall and a rotated box (so that every light casts a shadow on both
+floor and wall), a perspective camera at 64 x 48 pixels looking at them, a black world, and
+one light. The light is never inside the camera's frame (:func:`lights_out_of_frame` checks
+it). ``SCENES`` maps a scene name to its builder; each builder returns the ``bpy`` scene.
+
+Materials are pure Lambertian in Cycles (measured, ``tests/data/README.md``):
+
+- floor and wall: Principled BSDF with ``Specular IOR Level`` = 0 (no dielectric specular
+  layer; the default 0.5 is *not* Lambertian), ``Roughness`` 1, ``Diffuse Roughness`` 0;
+- box: a Diffuse BSDF with ``Roughness`` 0 (roughness > 0 would be Oren-Nayar).
+
+Diffuse reflectances (linear RGB) are in ``COLOURS``. Units follow DESIGN.md section 3:
+point/spot/area Power in W, sun Strength in W/m^2, emission Strength = radiance.
+
+Geometry (metres, Z up): floor 12 x 12 at z = 0 centred on (0, -2); wall in the plane y = 2,
+x in [-6, 6], z in [0, 5], facing -y; box 0.8 x 0.8 x 0.8 standing on the floor at
+(0.3, 0.2), turned 30 degrees about z. Camera at (0, -5, 2.2) looking at (0, 0.5, 0.6),
+horizontal field of view 50 degrees. Floor and wall fill the whole frame.
+
+Only ``bpy`` and ``mathutils``: no import of Lanterna, so the reference script can use it
+without the add-on.
+"""
+from __future__ import annotations
+
+import math
+
+import bpy
+from mathutils import Vector
+
+RESOLUTION = (64, 48)
+COLOURS = {
+    "floor": (0.70, 0.65, 0.55),
+    "wall": (0.45, 0.55, 0.75),
+    "box": (0.80, 0.30, 0.20),
+}
+WORLD_GREY = 0.25       # radiance of the constant world in the "world" scene [W m^-2 sr^-1]
+
+__all__ = ["SCENES", "RESOLUTION", "COLOURS", "WORLD_GREY", "build", "lights_out_of_frame"]
+
+
+# --- building blocks ----------------------------------------------------------------------
+def _reset():
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.engine = "CYCLES"
+    scene.render.resolution_x, scene.render.resolution_y = RESOLUTION
+    scene.render.resolution_percentage = 100
+    world = bpy.data.worlds.new("World")
+    scene.world = world
+    _set_world(world, 0.0)
+    return scene
+
+
+def _set_world(world, grey: float):
+    """A new World in Blender 5 is a Background node of grey 0.05: set the node (what Cycles
+    renders) and the viewport colour to ``grey``."""
+    world.color = (grey, grey, grey)
+    bg = world.node_tree.nodes["Background"]
+    bg.inputs["Color"].default_value = (grey, grey, grey, 1.0)
+    bg.inputs["Strength"].default_value = 1.0
+
+
+def _material_principled(name, colour):
+    mat = bpy.data.materials.new(name)
+    nodes = mat.node_tree.nodes
+    bsdf = nodes.get("Principled BSDF")
+    if bsdf is None:  # pragma: no cover - Blender always makes it for a new material
+        raise RuntimeError("new material has no Principled BSDF node")
+    bsdf.inputs["Base Color"].default_value = (*colour, 1.0)
+    bsdf.inputs["Roughness"].default_value = 1.0
+    bsdf.inputs["Specular IOR Level"].default_value = 0.0
+    bsdf.inputs["Diffuse Roughness"].default_value = 0.0
+    bsdf.inputs["Metallic"].default_value = 0.0
+    return mat
+
+
+def _material_diffuse(name, colour):
+    mat = bpy.data.materials.new(name)
+    tree = mat.node_tree
+    for node in list(tree.nodes):
+        tree.nodes.remove(node)
+    out = tree.nodes.new("ShaderNodeOutputMaterial")
+    bsdf = tree.nodes.new("ShaderNodeBsdfDiffuse")
+    bsdf.inputs["Color"].default_value = (*colour, 1.0)
+    bsdf.inputs["Roughness"].default_value = 0.0
+    tree.links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
+    return mat
+
+
+def _material_emission(name, colour, strength):
+    mat = bpy.data.materials.new(name)
+    tree = mat.node_tree
+    for node in list(tree.nodes):
+        tree.nodes.remove(node)
+    out = tree.nodes.new("ShaderNodeOutputMaterial")
+    em = tree.nodes.new("ShaderNodeEmission")
+    em.inputs["Color"].default_value = (*colour, 1.0)
+    em.inputs["Strength"].default_value = strength
+    tree.links.new(em.outputs["Emission"], out.inputs["Surface"])
+    return mat
+
+
+def _mesh_object(name, verts, faces, material):
+    mesh = bpy.data.meshes.new(name)
+    mesh.from_pydata([tuple(v) for v in verts], [], faces)
+    mesh.update()
+    mesh.materials.append(material)
+    obj = bpy.data.objects.new(name, mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    return obj
+
+
+def _room(scene):
+    """Floor, back wall, box and camera: the set shared by every scene."""
+    floor = _material_principled("Floor", COLOURS["floor"])
+    wall = _material_principled("Wall", COLOURS["wall"])
+    box = _material_diffuse("Box", COLOURS["box"])
+    _mesh_object("Floor", [(-6, -8, 0), (6, -8, 0), (6, 2, 0), (-6, 2, 0)], [(0, 1, 2, 3)], floor)
+    _mesh_object("Wall", [(-6, 2, 0), (-6, 2, 5), (6, 2, 5), (6, 2, 0)], [(0, 1, 2, 3)], wall)
+    h = 0.4
+    corners = [(x, y, z) for z in (-h, h) for y in (-h, h) for x in (-h, h)]
+    faces = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+    obj = _mesh_object("Box", corners, faces, box)
+    obj.location = (0.3, 0.2, h)
+    obj.rotation_euler = (0.0, 0.0, math.radians(30.0))
+
+    cam_data = bpy.data.cameras.new("Camera")
+    cam_data.sensor_fit = "AUTO"
+    cam_data.angle = math.radians(50.0)    # horizontal: the wider side with fit AUTO
+    cam_data.clip_start = 0.05
+    cam = bpy.data.objects.new("Camera", cam_data)
+    scene.collection.objects.link(cam)
+    _look_at(cam, (0.0, -5.0, 2.2), (0.0, 0.5, 0.6))
+    scene.camera = cam
+
+
+def _look_at(obj, eye, target):
+    """Place ``obj`` at ``eye`` with its local -Z towards ``target`` and +Y up."""
+    obj.location = eye
+    direction = Vector(target) - Vector(eye)
+    obj.rotation_euler = direction.to_track_quat("-Z", "Y").to_euler()
+
+
+def _light(scene, name, kind, location, target=None, rotation=None, **props):
+    data = bpy.data.lights.new(name, kind)
+    for key, value in props.items():
+        setattr(data, key, value)
+    obj = bpy.data.objects.new(name, data)
+    scene.collection.objects.link(obj)
+    if target is not None:
+        _look_at(obj, location, target)      # lights emit along their local -Z
+    else:
+        obj.location = location
+        if rotation is not None:
+            obj.rotation_euler = rotation
+    return obj
+
+
+# --- the scenes ---------------------------------------------------------------------------
+def point():
+    """Point light, 300 W, radius 0: hard shadows."""
+    scene = _reset()
+    _room(scene)
+    _light(scene, "Point", "POINT", (-1.2, -1.0, 2.8), energy=300.0, shadow_soft_size=0.0)
+    return scene
+
+
+def sun():
+    """Sun, strength 3 W/m^2, angle 0.5 degrees, from the left, in front and above: the box's
+    shadow falls on the floor to its right."""
+    scene = _reset()
+    _room(scene)
+    _light(scene, "Sun", "SUN", (-4.0, -2.0, 3.2), target=(0.0, 0.0, 0.0),
+           energy=3.0, angle=math.radians(0.5))
+    return scene
+
+
+def spot():
+    """Spot, 600 W, size 60 degrees, blend 0.15, radius 0: the cone edge crosses floor and
+    wall."""
+    scene = _reset()
+    _room(scene)
+    _light(scene, "Spot", "SPOT", (-1.5, -1.2, 3.0), target=(0.6, 0.9, 0.0),
+           energy=600.0, spot_size=math.radians(60.0), spot_blend=0.15, shadow_soft_size=0.0)
+    return scene
+
+
+def _area(shape, size, size_y=None, spread=math.radians(180.0), energy=200.0,
+          location=(-1.6, -0.8, 2.7), target=(0.6, 0.6, 0.0)):
+    scene = _reset()
+    _room(scene)
+    props = dict(energy=energy, shape=shape, size=size, spread=spread)
+    if size_y is not None:
+        props["size_y"] = size_y
+    obj = _light(scene, f"Area{shape.title()}", "AREA", location, target=target, **props)
+    return scene, obj
+
+
+def area_square():
+    """Square area light 1.2 m, 200 W, spread 180 degrees."""
+    return _area("SQUARE", 1.2)[0]
+
+
+def area_rectangle():
+    """Rectangle area light 1.6 x 0.4 m, 200 W, turned about its normal."""
+    scene, obj = _area("RECTANGLE", 1.6, 0.4)
+    obj.rotation_euler.rotate_axis("Z", math.radians(35.0))
+    return scene
+
+
+def area_disk():
+    """Disk area light, diameter 1.0 m, 200 W."""
+    return _area("DISK", 1.0)[0]
+
+
+def area_ellipse():
+    """Ellipse area light 1.4 x 0.5 m (diameters), 200 W, turned about its normal."""
+    scene, obj = _area("ELLIPSE", 1.4, 0.5)
+    obj.rotation_euler.rotate_axis("Z", math.radians(-25.0))
+    return scene
+
+
+def area_disk_collimated():
+    """Disk area light, diameter 2.4 m, spread 0: a collimated beam of irradiance P/A at
+    normal incidence (the seed's circular directional light), 400 W, from the left: the box
+    casts a sharp shadow to its right inside the elliptical footprint."""
+    return _area("DISK", 2.4, spread=0.0, energy=400.0,
+                 location=(-2.8, -0.3, 2.6), target=(0.0, 0.1, 0.0))[0]
+
+
+def emission_mesh():
+    """A 0.6 x 0.6 m quad with an Emission shader of strength 40 (white), tilted, above
+    and in front of the box. Cycles emits from both faces."""
+    scene = _reset()
+    _room(scene)
+    mat = _material_emission("Emitter", (1.0, 1.0, 1.0), 40.0)
+    s = 0.3
+    obj = _mesh_object("Emitter", [(-s, -s, 0), (s, -s, 0), (s, s, 0), (-s, s, 0)],
+                       [(0, 1, 2, 3)], mat)
+    _look_at(obj, (-0.5, -0.8, 2.9), (0.4, 0.8, 0.0))   # its local -Z faces the box
+    return scene
+
+
+def world():
+    """No light: a constant grey world of radiance WORLD_GREY (floor shadowed by the wall
+    and the box)."""
+    scene = _reset()
+    _room(scene)
+    _set_world(scene.world, WORLD_GREY)
+    return scene
+
+
+SCENES = {
+    "point": point,
+    "sun": sun,
+    "spot": spot,
+    "area_square": area_square,
+    "area_rectangle": area_rectangle,
+    "area_disk": area_disk,
+    "area_ellipse": area_ellipse,
+    "area_disk_collimated": area_disk_collimated,
+    "emission_mesh": emission_mesh,
+    "world": world,
+}
+
+
+def build(name: str):
+    """Build scene ``name`` into a fresh file and return the bpy scene."""
+    scene = SCENES[name]()
+    bpy.context.view_layer.update()
+    return scene
+
+
+def lights_out_of_frame(scene) -> list[str]:
+    """Names of lights (and emissive meshes) that fall inside the camera frame; [] is good.
+
+    Point-like lights are checked at their position; area lights and meshes at every corner
+    (an area light is inside if any corner is in front of the camera and inside the frame).
+    """
+    from bpy_extras.object_utils import world_to_camera_view
+
+    cam = scene.camera
+    inside = []
+    for obj in scene.objects:
+        points = []
+        if obj.type == "LIGHT":
+            if obj.data.type == "SUN":
+                continue
+            points = [obj.matrix_world.translation]
+            if obj.data.type == "AREA":
+                sx = obj.data.size / 2
+                sy = (obj.data.size_y if obj.data.shape in ("RECTANGLE", "ELLIPSE")
+                      else obj.data.size) / 2
+                points += [obj.matrix_world @ Vector((x, y, 0)) for x in (-sx, sx) for y in (-sy, sy)]
+        elif obj.type == "MESH" and obj.name == "Emitter":
+            points = [obj.matrix_world @ v.co for v in obj.data.vertices]
+        for p in points:
+            ndc = world_to_camera_view(scene, cam, p)
+            if ndc.z > 0 and 0 <= ndc.x <= 1 and 0 <= ndc.y <= 1:
+                inside.append(obj.name)
+                break
+    return inside

@@ -1,0 +1,236 @@
+"""Direct-light parity with Cycles: Lanterna's region means against stored Cycles references.
+
+Each scene of ``tests/parity_scenes.py`` (one light type each, diffuse surfaces, a box that
+casts shadows) is built in bpy, exported with ``export_scene``, rendered by Lanterna with
+``bounces = 0`` and compared with ``tests/data/cycles_direct/<scene>.npz`` (Cycles 5.0.1, CPU,
+direct light only, 4 seeds x 1024-4096 spp; made by ``tests/data/make_cycles_refs.py``).
+
+The comparison is over a 4 x 4 grid of blocks (12 x 16 pixels at 64 x 48), per RGB channel,
+row 0 = top of the image in both images (the references are read from Cycles' EXR, which is
+stored top-down; Lanterna's ``RenderResult.image`` is top-down too).
+
+Rule, per channel c, with ``peak_c`` the largest reference block mean of that channel:
+
+- a bright block (reference >= ``BRIGHT_FRACTION`` x peak_c): |Lanterna / Cycles - 1| <= 2 %;
+- a dark block: |Lanterna - Cycles| <= 2 % x peak_c.
+
+Why 2 %: the references' measured standard error is below 0.08 % of every bright block
+(``manifest.json``: 0.009-0.077 %, the largest at the soft area-light shadow edges), so
+they use none of the budget. Lanterna renders each scene twice (two seeds); the pooled
+relative standard error of its block means, estimated from the two renders, must be at most
+``MAX_NOISE`` = 0.4 %, so that with the reference's noise added the 2 % bound is >= 5 sigma
+(false alarm per block < 1e-6; 10 scenes x 48 block-channels) and the rest of the budget is
+left for what must agree but is not bit-identical: pixel-filter sampling at shadow, spot and
+silhouette edges, and the float32 geometry. Measured (first Lanterna, 2 x 32-128 spp): with the
+pixel filter matched to Cycles' the worst bright block is within 0.9 % in every scene; with a
+Blackman-Harris of half Cycles' support (Cycles' ``filter_width`` w spans [-w, w], see
+``tests/data/README.md``) the box-edge blocks are off by 2.3-3.5 % and fail. A block that
+differs by more than 2 % is a real difference in the light models, the exporter, the camera
+or the filter, and the message names it.
+
+These tests need ``engine/blender/export.py`` and ``engine/pipeline.py``; until those land
+they fail (on purpose: a parity test must not be skipped silently). The reference-data checks
+at the bottom run on their own.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+import parity_scenes  # noqa: E402
+
+REF_DIR = HERE / "data" / "cycles_direct"
+REL_TOL = 0.02            # bright blocks: relative difference
+ABS_TOL = 0.02            # dark blocks: absolute difference, as a fraction of the channel peak
+BRIGHT_FRACTION = 0.05    # a block is bright if its reference mean >= this x channel peak
+MAX_NOISE = 0.004         # largest pooled relative SE allowed for Lanterna + reference
+MAX_REF_NOISE = 0.001     # the references must be at least this good (measured <= 0.077 %)
+
+# Lanterna sampling per render (two renders per scene, seeds 1 and 2). Override all with
+# LANTERNA_PARITY_SAMPLES / LANTERNA_PARITY_LIGHT_SAMPLES to trade time for noise.
+LANTERNA_SAMPLES = {"world": (64, 16), "emission_mesh": (32, 8), "area_disk_collimated": (128, 4)}
+DEFAULT_SAMPLES = (64, 4)     # (camera samples per pixel, light samples)
+SEEDS = (1, 2)
+
+
+def _samples(name):
+    spp, light = LANTERNA_SAMPLES.get(name, DEFAULT_SAMPLES)
+    spp = int(os.environ.get("LANTERNA_PARITY_SAMPLES", spp))
+    light = int(os.environ.get("LANTERNA_PARITY_LIGHT_SAMPLES", light))
+    return spp, light
+
+
+def load_reference(name):
+    path = REF_DIR / f"{name}.npz"
+    if not path.exists():
+        pytest.fail(f"{name}: no Cycles reference {path}; run "
+                    f".venv/bin/python tests/data/make_cycles_refs.py {name}")
+    with np.load(path) as data:
+        ref = {k: data[k] for k in data.files}
+    ref["settings"] = json.loads(str(ref["settings"]))
+    return ref
+
+
+def block_means(image, grid):
+    """(H, W, C) -> (GY, GX, C) block means, row 0 = top blocks."""
+    h, w, c = image.shape
+    gy, gx = (int(v) for v in grid)
+    assert h % gy == 0 and w % gx == 0, f"image {w}x{h} does not split into {gx}x{gy} blocks"
+    return image.reshape(gy, h // gy, gx, w // gx, c).astype(np.float64).mean(axis=(1, 3))
+
+
+def compare_regions(lan, ref, ref_se, lan_se, shape):
+    """Apply the rule of the module docstring. Returns (failures, table): a list of one-line
+    messages for the blocks that break it and a text grid of Lanterna / Cycles ratios."""
+    gy, gx, _ = ref.shape
+    h, w = shape
+    bh, bw = h // gy, w // gx
+    failures = []
+    peak = ref.reshape(-1, 3).max(axis=0)
+    for c, channel in enumerate("RGB"):
+        if peak[c] <= 0:
+            if np.any(np.abs(lan[..., c]) > 1e-6):
+                failures.append(f"channel {channel}: Cycles is black, Lanterna has up to "
+                                f"{np.abs(lan[..., c]).max():.4g}")
+            continue
+        for i in range(gy):
+            for j in range(gx):
+                r, l = ref[i, j, c], lan[i, j, c]
+                where = (f"block (row {i}, col {j}) = pixels rows {i * bh}-{(i + 1) * bh - 1}, "
+                         f"cols {j * bw}-{(j + 1) * bw - 1} (row 0 = top), channel {channel}")
+                noise = f"SE Cycles {ref_se[i, j, c]:.2g}, Lanterna {lan_se[i, j, c]:.2g}"
+                if r >= BRIGHT_FRACTION * peak[c]:
+                    rel = l / r - 1.0
+                    if not abs(rel) <= REL_TOL:
+                        failures.append(f"{where}: Lanterna {l:.5g} vs Cycles {r:.5g} "
+                                        f"({rel:+.2%}, limit ±{REL_TOL:.0%}; {noise})")
+                else:
+                    diff = l - r
+                    if not abs(diff) <= ABS_TOL * peak[c]:
+                        failures.append(f"{where} (dark block): Lanterna {l:.5g} vs Cycles {r:.5g} "
+                                        f"(difference {diff / peak[c]:+.2%} of the channel peak "
+                                        f"{peak[c]:.4g}, limit ±{ABS_TOL:.0%}; {noise})")
+    lum_w = np.array([0.2126, 0.7152, 0.0722])
+    lum_ref, lum_lan = ref @ lum_w, lan @ lum_w
+    rows = ["   " + " ".join(f"  col {j} " for j in range(gx))]
+    for i in range(gy):
+        cells = [f"{lum_lan[i, j] / lum_ref[i, j]:8.4f}" if lum_ref[i, j] > 0 else "   black"
+                 for j in range(gx)]
+        rows.append(f"r{i} " + " ".join(cells))
+    return failures, "\n".join(rows)
+
+
+def render_lanterna(name):
+    from lanterna.engine.blender.export import export_scene
+    from lanterna.engine.pipeline import RenderSettings, render
+
+    parity_scenes.build(name)
+    scene = export_scene(bpy.context.evaluated_depsgraph_get())
+    spp, light = _samples(name)
+    images = []
+    for seed in SEEDS:
+        result = render(scene, RenderSettings(samples=spp, light_samples=light, bounces=0, seed=seed))
+        image = np.asarray(result.image, dtype=np.float64)
+        images.append(image)
+    return images, (spp, light)
+
+
+@pytest.mark.parametrize("name", list(parity_scenes.SCENES))
+def test_direct_light_matches_cycles(name):
+    ref = load_reference(name)
+    grid = tuple(int(v) for v in ref["grid"])
+    images, (spp, light) = render_lanterna(name)
+    h, w = ref["image"].shape[:2]
+    for image in images:
+        assert image.shape == (h, w, 3), (
+            f"{name}: Lanterna image shape {image.shape}, Cycles reference {(h, w, 3)} "
+            "(resolution taken from the scene's render settings: 64 x 48)")
+        assert np.all(np.isfinite(image)), f"{name}: Lanterna image has non-finite pixels"
+
+    blocks = [block_means(image, grid) for image in images]
+    lan = np.mean(blocks, axis=0)
+    lan_se = np.abs(blocks[0] - blocks[1]) / 2.0          # SE of the mean of two renders
+    ref_mean, ref_se = ref["region_mean"], ref["region_se"]
+
+    # noise: pooled over the bright blocks so that one estimate has many degrees of freedom
+    peak = ref_mean.reshape(-1, 3).max(axis=0)
+    bright = ref_mean >= BRIGHT_FRACTION * np.maximum(peak, 1e-30)
+    pooled_lan = math.sqrt(np.mean((lan_se[bright] / ref_mean[bright]) ** 2))
+    pooled_ref = math.sqrt(np.mean((ref_se[bright] / ref_mean[bright]) ** 2))
+    noise = math.hypot(pooled_lan, pooled_ref)
+
+    failures, table = compare_regions(lan, ref_mean, ref_se, lan_se, (h, w))
+    total = images[0].reshape(-1, 3).sum(0) / 2 + images[1].reshape(-1, 3).sum(0) / 2
+    total_ratio = total / np.maximum(ref["image"].reshape(-1, 3).sum(0), 1e-30)
+    header = (f"{name}: Lanterna ({spp} spp, {light} light samples, seeds {SEEDS}) vs Cycles "
+              f"({ref['settings']['samples']} spp x {len(ref['settings']['seeds'])} seeds); "
+              f"whole-image ratio R,G,B = {np.round(total_ratio, 4).tolist()}; pooled relative SE "
+              f"Lanterna {pooled_lan:.3%}, Cycles {pooled_ref:.3%}")
+    messages = list(failures)
+    if noise > MAX_NOISE:
+        messages.append(f"noise: pooled relative SE {noise:.3%} > {MAX_NOISE:.1%}: the 2 % bound "
+                        f"is not 5 sigma; raise Lanterna's samples for this scene "
+                        f"(LANTERNA_PARITY_SAMPLES)")
+    assert not messages, (header + f"\n{len(failures)} of {ref_mean.size} block-channels "
+                          "outside the rule:\n  " + "\n  ".join(messages)
+                          + "\nLanterna / Cycles luminance per block:\n" + table)
+
+
+# --- the reference data itself (no Lanterna needed) ---------------------------------------
+def test_references_exist_and_are_quiet():
+    """Every scene has a reference at 64 x 48 on a grid that divides it, made with direct
+    light only and no denoiser, and its block SE is well inside the budget."""
+    problems = []
+    for name in parity_scenes.SCENES:
+        ref = load_reference(name)
+        s = ref["settings"]
+        mean, se = ref["region_mean"], ref["region_se"]
+        if ref["image"].shape != (parity_scenes.RESOLUTION[1], parity_scenes.RESOLUTION[0], 3):
+            problems.append(f"{name}: image shape {ref['image'].shape}")
+        if not np.allclose(block_means(ref["image"], ref["grid"]), mean, rtol=1e-5, atol=1e-7):
+            problems.append(f"{name}: region_mean does not match the stored image")
+        if s["max_bounces"] != 0 or s["use_denoising"] or s["use_adaptive_sampling"] \
+                or s["sample_clamp_direct"] or s["sample_clamp_indirect"]:
+            problems.append(f"{name}: reference settings are not direct-only/unbiased: {s}")
+        peak = mean.reshape(-1, 3).max(axis=0)
+        bright = mean >= BRIGHT_FRACTION * np.maximum(peak, 1e-30)
+        rel = (se / np.maximum(mean, 1e-30))[bright]
+        if rel.max() > MAX_REF_NOISE:
+            problems.append(f"{name}: reference relative SE up to {rel.max():.3%}")
+        if not np.all(peak > 0):
+            problems.append(f"{name}: a channel is black everywhere ({peak})")
+    assert not problems, "\n".join(problems)
+
+
+def test_region_rule_catches_a_one_percent_light_error_only_above_the_bound():
+    """The comparison is not vacuous: a 3 % scale error fails, a 1 % one passes, a dark
+    block is judged against the peak, and the message names block, channel and values."""
+    ref = load_reference("point")
+    mean, se = ref["region_mean"], ref["region_se"]
+    zeros = np.zeros_like(se)
+    assert compare_regions(mean * 1.01, mean, se, zeros, (48, 64))[0] == []
+    failures, table = compare_regions(mean * 1.03, mean, se, zeros, (48, 64))
+    peak = mean.reshape(-1, 3).max(axis=0)
+    n_bright = int((mean >= BRIGHT_FRACTION * peak).sum())
+    assert len(failures) == n_bright and "+3.00%" in failures[0] and "channel" in failures[0]
+    shifted = mean.copy()
+    shifted[0, 0] += 0.03 * peak                      # any block, beyond the absolute bound
+    assert any("block (row 0, col 0)" in f for f in compare_regions(shifted, mean, se, zeros, (48, 64))[0])
+    flipped = mean[::-1].copy()                        # upside-down image (row-order mistake)
+    assert compare_regions(flipped, mean, se, zeros, (48, 64))[0], "a flipped image must fail"
+
+
+def test_parity_scene_lights_are_out_of_frame():
+    for name in parity_scenes.SCENES:
+        scene = parity_scenes.build(name)
+        assert parity_scenes.lights_out_of_frame(scene) == [], name
