@@ -1,0 +1,112 @@
+"""Lanterna's settings as Blender PropertyGroups.
+
+``Scene.lanterna``     render settings (sampling); the exporter (``engine/blender/export.py``)
+                       is the only reader that turns them into ``pipeline.RenderSettings``.
+``Material.lanterna``  the seed's three radiometric properties (section 3.2): diffuse
+                       reflectance rho_d, specular reflectance rho_s (both per RGB channel, in
+                       [0, 1]) and radiant exitance M [W/m^2]; by default derived from the
+                       material's node tree instead.
+``Light.lanterna``     per-light settings for the photon stages (a later issue).
+
+Every property carries a description, limits and a subtype. Names are part of the contract
+with the exporter: do not rename them.
+"""
+
+import bpy
+from bpy.props import (BoolProperty, FloatProperty, FloatVectorProperty, IntProperty,
+                       PointerProperty)
+
+INT_MAX = 2 ** 31 - 1
+
+
+class LanternaSceneSettings(bpy.types.PropertyGroup):
+    """Render settings of one scene (Properties editor > Render > Sampling)."""
+
+    samples: IntProperty(
+        name="Samples",
+        description="Camera samples per pixel",
+        default=16, min=1, max=65536, soft_max=4096, subtype='NONE',
+    )
+    light_samples: IntProperty(
+        name="Light Samples",
+        description="Samples per area/mesh/world light per camera hit",
+        default=4, min=1, max=65536, soft_max=256, subtype='NONE',
+    )
+    bounces: IntProperty(
+        name="Bounces",
+        description="Indirect bounces (0 = direct light only)",
+        default=0, min=0, max=64, subtype='NONE',
+    )
+    seed: IntProperty(
+        name="Seed",
+        description="Seed of the random sequences; the same seed gives the same image",
+        default=0, min=0, max=INT_MAX, subtype='NONE',
+    )
+    threads: IntProperty(
+        name="Threads",
+        description="Worker threads (0 = automatic: one per CPU core)",
+        default=0, min=0, max=1024, soft_max=64, subtype='NONE',
+    )
+
+
+class LanternaMaterialSettings(bpy.types.PropertyGroup):
+    """The seed's radiometric material: rho_d, rho_s and M (section 3.2)."""
+
+    derive_from_nodes: BoolProperty(
+        name="Derive from Nodes",
+        description=("Take reflectances and exitance from the material's node tree (Principled, "
+                     "Diffuse, Glossy, Emission); off: use the values below"),
+        default=True,
+    )
+    diffuse: FloatVectorProperty(
+        name="Diffuse",
+        description="Diffuse (Lambertian) reflectance rho_d per channel; BRDF rho_d / pi",
+        size=3, default=(0.8, 0.8, 0.8), min=0.0, max=1.0, subtype='COLOR',
+    )
+    specular: FloatVectorProperty(
+        name="Specular",
+        description="Perfect-mirror reflectance rho_s per channel",
+        size=3, default=(0.0, 0.0, 0.0), min=0.0, max=1.0, subtype='COLOR',
+    )
+    exitance: FloatVectorProperty(
+        name="Exitance",
+        description="Radiant exitance M in W/m² per channel (radiance L = M / pi per side)",
+        size=3, default=(0.0, 0.0, 0.0), min=0.0, max=1.0e9, soft_max=1000.0,
+        precision=3, subtype='NONE',
+    )
+
+
+class LanternaLightSettings(bpy.types.PropertyGroup):
+    """Per-light settings for the photon stages."""
+
+    photon_share: FloatProperty(
+        name="Photon Share",
+        description=("Relative weight of this light when the photon budget is split between "
+                     "lights (1 = in proportion to its power)"),
+        default=1.0, min=0.0, max=1000.0, soft_max=10.0, subtype='NONE',
+    )
+
+
+classes = (LanternaSceneSettings, LanternaMaterialSettings, LanternaLightSettings)
+
+_POINTERS = (
+    (bpy.types.Scene, LanternaSceneSettings, "Lanterna render settings"),
+    (bpy.types.Material, LanternaMaterialSettings, "Lanterna material settings"),
+    (bpy.types.Light, LanternaLightSettings, "Lanterna light settings"),
+)
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+    for owner, group, description in _POINTERS:
+        owner.lanterna = PointerProperty(type=group, name="Lanterna", description=description)
+
+
+def unregister():
+    for owner, _group, _description in reversed(_POINTERS):
+        if hasattr(owner, "lanterna"):
+            del owner.lanterna
+    for cls in reversed(classes):
+        if getattr(cls, "is_registered", False):
+            bpy.utils.unregister_class(cls)
