@@ -1,0 +1,455 @@
+"""The ``lanterna`` command: render a .blend (or a seed scene) to EXR, save the seed scenes,
+run the benchmarks.
+
+Usage
+-----
+``lanterna render [SCENE.blend] -o OUT.exr [--png OUT.png] [--report REPORT.json]``
+    ``[--scene scene1|scene2] [--resolution WxH] [--samples N] [--light-samples N]``
+    ``[--bounces N] [--seed N] [--threads N]``
+
+    Renders the active scene of ``SCENE.blend`` with Lanterna (whatever engine the file names),
+    or the seed's Scene 1 (``--scene`` picks another) when no file is given. Flags override
+    the scene's ``Scene.lanterna`` settings; ``--resolution`` sets the full frame at 100 %.
+    A render region (border) in the file is honoured as Blender does: with Crop the EXR holds
+    the region only, otherwise the full frame with zeros outside the region.
+    Writes ``OUT.exr`` (channels R, G, B, float32, linear radiance [W m^-2 sr^-1]), the
+    optional sRGB ``OUT.png`` (clipped, no tone mapping) and the optional JSON report: the
+    pipeline's report, the export statistics, warnings, settings, timings and peak memory.
+    Progress and warnings go to stderr.
+
+``lanterna scene scene1|scene2 -o FILE.blend``
+    Builds a seed scene (``engine/blender/seed_scenes.py``) and saves it.
+
+``lanterna bench [...]``
+    Hands its arguments to the benchmark module's ``main``.
+
+Errors in the input (bad flags, a missing or unreadable .blend, an output that cannot be
+written, a scene the exporter rejects) end with one line ``lanterna: error: ...`` on stderr
+and exit status 2, before any rendering where they can be found early. Outputs are written
+to temporary names in their own directories and renamed once all of them are complete, so
+nothing is ever half-written. Ctrl-C stops the render between batches and writes nothing
+(status 130). ``bpy`` is imported only once a command needs it, so ``--help`` is quick.
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import os
+import resource
+import signal
+import sys
+import time
+
+PROG = "lanterna"
+SEED_SCENES = ("scene1", "scene2")
+BLEND_MAGIC = (b"BLENDER", b"\x28\xb5\x2f\xfd", b"\x1f\x8b")  # plain, zstd, gzip
+EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_CANCELLED = 0, 1, 2, 130
+
+
+class UsageError(Exception):
+    """Bad input from the user: printed as one line, exit status 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # argparse would print the usage and exit; we want one line
+        raise UsageError(message)
+
+
+# -- Argument types ---------------------------------------------------------------------------
+def _int_at_least(lowest: int, highest: int | None = None):
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if value < lowest or (highest is not None and value > highest):
+            bound = f"at least {lowest}" if highest is None else f"between {lowest} and {highest}"
+            raise argparse.ArgumentTypeError(f"must be {bound}, got {value}")
+        return value
+    parse.__name__ = "integer"
+    return parse
+
+
+def _resolution(text: str) -> tuple[int, int]:
+    parts = text.lower().replace("×", "x").split("x")
+    try:
+        w, h = (int(p) for p in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 640x480, got {text!r}") \
+            from None
+    if not (1 <= w <= 65536 and 1 <= h <= 65536):
+        raise argparse.ArgumentTypeError(f"width and height must be 1 to 65536, got {w}x{h}")
+    return w, h
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog=PROG, description="Lanterna: photon-mapping renderer for Blender scenes.")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+
+    render = sub.add_parser("render", help="render a .blend or a seed scene to EXR",
+                            description="Render a .blend (or the seed's Scene 1) to OpenEXR.")
+    render.add_argument("blend", nargs="?", metavar="SCENE.blend",
+                        help="the .blend to render (default: the seed's Scene 1)")
+    render.add_argument("--scene", choices=SEED_SCENES, default=None,
+                        help="render a seed scene built by code instead of a file")
+    render.add_argument("-o", "--output", required=True, metavar="OUT.exr",
+                        help="the OpenEXR file to write (R, G, B float32, linear)")
+    render.add_argument("--png", metavar="OUT.png", help="also write an sRGB 8-bit PNG")
+    render.add_argument("--report", metavar="REPORT.json", help="write the render report as JSON")
+    render.add_argument("--resolution", type=_resolution, metavar="WxH",
+                        help="full-frame size in pixels (percentage set to 100)")
+    render.add_argument("--samples", type=_int_at_least(1, 65536), metavar="N",
+                        help="camera samples per pixel")
+    render.add_argument("--light-samples", type=_int_at_least(1, 65536), metavar="N",
+                        help="samples per area/mesh/world light per camera hit")
+    render.add_argument("--bounces", type=_int_at_least(0, 64), metavar="N",
+                        help="indirect bounces (0 = direct light only)")
+    render.add_argument("--seed", type=_int_at_least(0, 2 ** 31 - 1), metavar="N",
+                        help="random seed")
+    render.add_argument("--threads", type=_int_at_least(0, 1024), metavar="N",
+                        help="worker threads (0 = one per core)")
+    render.add_argument("--quiet", action="store_true", help="no progress line")
+
+    scene = sub.add_parser("scene", help="save a seed scene as a .blend",
+                           description="Build one of the seed's scenes and save it.")
+    scene.add_argument("name", choices=SEED_SCENES)
+    scene.add_argument("-o", "--output", required=True, metavar="FILE.blend")
+
+    sub.add_parser("bench", help="run the benchmarks (arguments are passed on)", add_help=False)
+    return parser
+
+
+# -- Checks before any work -------------------------------------------------------------------
+def _check_output(path: str, suffix: str, flag: str) -> str:
+    path = os.path.abspath(os.path.expanduser(path))
+    if not path.lower().endswith(suffix):
+        raise UsageError(f"{flag} {path}: the file name must end in {suffix}")
+    if os.path.isdir(path):
+        raise UsageError(f"{flag} {path}: is a directory")
+    directory = os.path.dirname(path)
+    if not os.path.isdir(directory):
+        raise UsageError(f"{flag} {path}: directory {directory} does not exist")
+    if not os.access(directory, os.W_OK | os.X_OK):
+        raise UsageError(f"{flag} {path}: directory {directory} is not writable")
+    if os.path.exists(path) and not os.access(path, os.W_OK):
+        raise UsageError(f"{flag} {path}: file exists and is not writable")
+    return path
+
+
+def _check_blend(path: str) -> str:
+    path = os.path.abspath(os.path.expanduser(path))
+    if not os.path.exists(path):
+        raise UsageError(f"{path}: no such file")
+    if not os.path.isfile(path):
+        raise UsageError(f"{path}: not a file")
+    try:
+        with open(path, "rb") as f:
+            head = f.read(8)
+    except OSError as exc:
+        raise UsageError(f"{path}: cannot read ({exc.strerror})") from None
+    if not head.startswith(BLEND_MAGIC):
+        raise UsageError(f"{path}: not a .blend file")
+    return path
+
+
+# -- Blender side -----------------------------------------------------------------------------
+def _ensure_registered():
+    from . import registration
+
+    registration.register()  # idempotent
+
+
+def _open_blend(path: str):
+    import bpy
+
+    try:
+        bpy.ops.wm.open_mainfile(filepath=path, load_ui=False, use_scripts=False)
+    except RuntimeError as exc:
+        reason = " ".join(str(exc).split())
+        reason = reason[len("Error: "):] if reason.startswith("Error: ") else reason
+        raise UsageError(f"{path}: cannot be opened: {reason}") from None
+    return bpy.context.scene
+
+
+def _apply_overrides(scene, args) -> None:
+    if args.resolution is not None:
+        scene.render.resolution_x, scene.render.resolution_y = args.resolution
+        scene.render.resolution_percentage = 100
+    settings = scene.lanterna
+    for flag, prop in (("samples", "samples"), ("light_samples", "light_samples"),
+                       ("bounces", "bounces"), ("seed", "seed"), ("threads", "threads")):
+        value = getattr(args, flag)
+        if value is not None:
+            setattr(settings, prop, value)
+
+
+class _Progress:
+    """One progress line on stderr: rewritten in place on a terminal, else every 10 %."""
+
+    def __init__(self, enabled: bool, stream=None):
+        self.stream = stream or sys.stderr
+        self.enabled = enabled
+        self.tty = enabled and hasattr(self.stream, "isatty") and self.stream.isatty()
+        self.last_step = -1
+        self.started = time.perf_counter()
+        self.dirty = False
+
+    def __call__(self, fraction: float, text: str = "") -> None:
+        if not self.enabled:
+            return
+        pct = int(round(100 * max(0.0, min(1.0, fraction))))
+        line = f"{PROG}: {pct:3d}% {text} ({time.perf_counter() - self.started:.1f} s)"
+        if self.tty:
+            self.stream.write("\r\033[K" + line)
+            self.dirty = True
+        elif pct // 10 != self.last_step:
+            self.last_step = pct // 10
+            self.stream.write(line + "\n")
+        self.stream.flush()
+
+    def close(self) -> None:
+        if self.dirty:
+            self.stream.write("\n")
+            self.stream.flush()
+            self.dirty = False
+
+
+@contextlib.contextmanager
+def _sigint_flag():
+    """While active, Ctrl-C sets ``flag['set']`` instead of raising (main thread only)."""
+    flag = {"set": False}
+
+    def handler(_signum, _frame):
+        flag["set"] = True
+
+    try:
+        previous = signal.signal(signal.SIGINT, handler)
+    except ValueError:  # not the main thread
+        previous = None
+    try:
+        yield flag
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+
+
+def _peak_memory_mb() -> float:
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return rss / (1024.0 * 1024.0) if sys.platform == "darwin" else rss / 1024.0
+
+
+def _full_frame(image, scene_camera, crop: bool):
+    """Place the border window into the full frame (zeros outside) unless cropping."""
+    import numpy as np
+
+    width, height = scene_camera.resolution
+    x0, y0, x1, y1 = scene_camera.border
+    if crop or (x0, y0, x1, y1) == (0, 0, width, height):
+        return image
+    full = np.zeros((height, width, 3), np.float32)
+    full[height - y1:height - y0, x0:x1] = image
+    return full
+
+
+def cmd_render(args) -> int:
+    started = time.perf_counter()
+    # 1. Everything that can be checked without Blender, before any work.
+    if args.blend and args.scene:
+        raise UsageError("give either SCENE.blend or --scene, not both")
+    outputs = {"exr": _check_output(args.output, ".exr", "-o")}
+    if args.png:
+        outputs["png"] = _check_output(args.png, ".png", "--png")
+    if args.report:
+        outputs["report"] = _check_output(args.report, ".json", "--report")
+    if len(set(outputs.values())) != len(outputs):
+        raise UsageError("the output files must be different")
+    blend = _check_blend(args.blend) if args.blend else None
+
+    # 2. Load the scene.
+    import bpy  # noqa: F401  (slow import, only now)
+    from ..scene import SceneError
+    from .. import imageio, pipeline
+    from . import export, seed_scenes
+
+    _ensure_registered()
+    t0 = time.perf_counter()
+    scene = _open_blend(blend) if blend else seed_scenes.build(args.scene or "scene1")
+    _apply_overrides(scene, args)
+    load_seconds = time.perf_counter() - t0
+
+    # 3. Export.
+    t0 = time.perf_counter()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    resolution = export.render_resolution(scene.render)
+    if resolution[0] < 1 or resolution[1] < 1:
+        raise UsageError(f"the scene's resolution is {resolution[0]}x{resolution[1]} pixels")
+    border = export.render_border(scene.render, resolution)
+    try:
+        lscene = export.export_scene(depsgraph, resolution=resolution, border=border)
+        settings = export.export_settings(scene)
+    except SceneError as exc:
+        raise UsageError(str(exc)) from None
+    export_seconds = time.perf_counter() - t0
+    warnings = []
+
+    def warn(text):
+        text = " ".join(str(text).split())
+        if text not in warnings:
+            warnings.append(text)
+            print(f"{PROG}: warning: {text}", file=sys.stderr)
+
+    for text in lscene.warnings:
+        warn(text)
+
+    # 4. Render.
+    progress = _Progress(enabled=not args.quiet)
+    t0 = time.perf_counter()
+    with _sigint_flag() as interrupted:
+        try:
+            result = pipeline.render(lscene, settings, progress=progress,
+                                     cancelled=lambda: interrupted["set"])
+        except SceneError as exc:
+            raise UsageError(str(exc)) from None
+        finally:
+            progress.close()
+    render_seconds = time.perf_counter() - t0
+    for text in (result.report or {}).get("warnings", ()):
+        warn(text)
+    if result.cancelled or interrupted["set"]:
+        print(f"{PROG}: cancelled; nothing written", file=sys.stderr)
+        return EXIT_CANCELLED
+
+    # 5. Write everything to temporary names, then rename all.
+    image = _full_frame(result.image, lscene.camera, crop=bool(scene.render.use_crop_to_border))
+    t0 = time.perf_counter()
+    report = {
+        "lanterna": _version(),
+        "scene": blend or f"seed:{args.scene or 'scene1'}",
+        "blender_scene": scene.name,
+        "resolution": list(resolution),
+        "border": list(border) if border else None,
+        "image_size": [int(image.shape[1]), int(image.shape[0])],
+        "settings": _settings_dict(settings),
+        "export": dict(lscene.stats),
+        "warnings": warnings,
+        "pipeline": result.report,
+        "outputs": outputs,
+        "time": {"load_seconds": load_seconds, "export_seconds": export_seconds,
+                 "render_seconds": render_seconds},
+    }
+    with contextlib.ExitStack() as stack:
+        exr_tmp = stack.enter_context(imageio.atomic_output(outputs["exr"]))
+        imageio.write_exr(exr_tmp, image, attributes={"software": f"Lanterna {_version()}"})
+        if "png" in outputs:
+            imageio.write_png(stack.enter_context(imageio.atomic_output(outputs["png"])), image)
+        if "report" in outputs:
+            report_tmp = stack.enter_context(imageio.atomic_output(outputs["report"]))
+            report["time"]["write_seconds"] = time.perf_counter() - t0
+            report["time"]["total_seconds"] = time.perf_counter() - started
+            report["peak_memory_mb"] = _peak_memory_mb()
+            with open(report_tmp, "w", encoding="utf-8") as f:
+                json.dump(_plain(report), f, indent=2, allow_nan=False)
+                f.write("\n")
+    total = time.perf_counter() - started
+    h, w = image.shape[:2]
+    print(f"{PROG}: wrote {outputs['exr']} ({w}x{h}, {settings.samples} spp) "
+          f"in {total:.2f} s ({render_seconds:.2f} s rendering)")
+    return EXIT_OK
+
+
+def _plain(obj):
+    """``obj`` as plain JSON data: numpy values converted, NaN and infinities as None."""
+    import math
+
+    import numpy as np
+
+    if isinstance(obj, dict):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple, set)):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _plain(obj.tolist())
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if obj is None or isinstance(obj, (bool, int, str)):
+        return obj
+    return str(obj)
+
+
+def _settings_dict(settings) -> dict:
+    import dataclasses
+
+    return dataclasses.asdict(settings) if dataclasses.is_dataclass(settings) else dict(settings)
+
+
+def _version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("lanterna")
+    except Exception:
+        return "unknown"
+
+
+def cmd_scene(args) -> int:
+    path = _check_output(args.output, ".blend", "-o")
+    from . import seed_scenes  # imports bpy
+
+    _ensure_registered()
+    seed_scenes.save(args.name, path)  # Blender writes to "path@" and renames: atomic
+    print(f"{PROG}: wrote {path}")
+    return EXIT_OK
+
+
+def cmd_bench(argv: list[str]) -> int:
+    bench_main = None
+    for module in ("lanterna.engine.blender.bench", "lanterna.engine.bench"):
+        try:
+            bench_main = __import__(module, fromlist=["main"]).main
+            break
+        except (ImportError, AttributeError):
+            continue
+    if bench_main is None:
+        raise UsageError("the benchmarks are not available in this build "
+                         "(no engine/blender/bench.py or engine/bench.py with main(argv))")
+    code = bench_main(argv)
+    return int(code or 0)
+
+
+def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        if argv and argv[0] == "bench":
+            return cmd_bench(argv[1:])
+        args = build_parser().parse_args(argv)
+        if args.command == "render":
+            return cmd_render(args)
+        if args.command == "scene":
+            return cmd_scene(args)
+        build_parser().print_help(sys.stderr)
+        return EXIT_USAGE
+    except UsageError as exc:
+        message = " ".join(str(exc).split())
+        print(f"{PROG}: error: {message}", file=sys.stderr)
+        return EXIT_USAGE
+    except SystemExit as exc:  # --help, or a module that calls sys.exit
+        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else EXIT_USAGE)
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted", file=sys.stderr)
+        return EXIT_CANCELLED
+    except Exception as exc:  # a bug: say so in one line, the traceback only on request
+        print(f"{PROG}: internal error: {type(exc).__name__}: {exc}", file=sys.stderr)
+        if os.environ.get("LANTERNA_DEBUG"):
+            import traceback
+
+            traceback.print_exc()
+        else:
+            print(f"{PROG}: set LANTERNA_DEBUG=1 for the traceback", file=sys.stderr)
+        return EXIT_INTERNAL
+
+
+if __name__ == "__main__":
+    sys.exit(main())
