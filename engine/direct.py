@@ -50,10 +50,10 @@ def direct_irradiance(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng
     for w, dist, weight, rgb in lights.delta_rays(x, n):
         live = weight > 0
         if live.all():
-            groups.append((None, w, dist, weight, rgb))
+            groups.append((None, w, dist, weight, rgb, False))
         elif live.any():
             idx = np.nonzero(live)[0]
-            groups.append((idx, w[idx], dist[idx], weight[idx], rgb))
+            groups.append((idx, w[idx], dist[idx], weight[idx], rgb, False))
 
     # Sampled lights: K stratified samples per point, light chosen by estimated contribution.
     if lights.sampled and light_samples > 0:
@@ -76,34 +76,42 @@ def direct_irradiance(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng
             weight = weight / (p_sel[sel] * k)
             live = (weight > 0) & np.isfinite(weight)
             if live.any():
-                groups.append((pts[live], w[live], dist[live], weight[live], light.rgb))
+                groups.append((pts[live], w[live], dist[live], weight[live], light.rgb,
+                               getattr(light, 'in_bvh', False)))
 
     if not groups:
         return irradiance
-    everyone = np.arange(count)
-    targets = [everyone if g[0] is None else g[0] for g in groups]
-    target = np.concatenate(targets)
-    dirs = np.concatenate([g[1] for g in groups]).astype(x.dtype, copy=False)
-    dist = np.concatenate([g[2] for g in groups])
-    org = x[target] if len(groups) > 1 or groups[0][0] is not None else x
-    normals = n if offset_normals is None else offset_normals
-    start = accel.offset_origins(org, normals[target] if org is not x else normals, dirs)
-    # Aim from the offset origin at the sampled light point itself and stop short of it by
-    # its own offset, so that neither the receiver nor the emitter shadows the ray.
-    finite = np.isfinite(dist)
+    single = len(groups) == 1 and groups[0][0] is None
+    if single:
+        target = None
+        dirs, dist, org = groups[0][1].astype(x.dtype, copy=False), groups[0][2], x
+        normals = n if offset_normals is None else offset_normals
+    else:
+        everyone = np.arange(count)
+        target = np.concatenate([everyone if g[0] is None else g[0] for g in groups])
+        dirs = np.concatenate([g[1] for g in groups]).astype(x.dtype, copy=False)
+        dist = np.concatenate([g[2] for g in groups])
+        org = x[target]
+        normals = (n if offset_normals is None else offset_normals)[target]
+    start = accel.offset_origins(org, normals, dirs)
     far = np.full(len(org), 1e37, np.float32)
+    finite = np.isfinite(dist)
+    # Rays to points and to lights that are not geometry: stop an offset short of the light.
     if finite.all():
-        light_point = org + dist[:, None].astype(org.dtype) * dirs
-        towards = light_point - start
-        length = np.sqrt(np.einsum("ij,ij->i", towards, towards))
-        dirs = towards / np.maximum(length, 1e-30)[:, None]
-        far[:] = np.maximum(length - 2.0 * accel.offset_distance(light_point), 0.0)
+        far[:] = dist
+        far -= accel.offset_distance(org)
     elif finite.any():
-        light_point = org[finite] + dist[finite, None] * dirs[finite]
-        towards = light_point - start[finite]
+        far[finite] = dist[finite] - accel.offset_distance(org[finite])
+    # Rays to emissive meshes end on geometry of the BVH: aim from the offset origin at the
+    # sampled point itself and stop short of it by its own offset, so that neither the
+    # receiver nor the emitter shadows the ray.
+    if any(g[5] for g in groups):
+        aim = np.concatenate([np.full(len(g[2]), g[5]) for g in groups])
+        light_point = org[aim] + dist[aim, None].astype(org.dtype) * dirs[aim]
+        towards = light_point - start[aim]
         length = np.sqrt(np.einsum("ij,ij->i", towards, towards))
-        dirs[finite] = towards / np.maximum(length, 1e-30)[:, None]
-        far[finite] = np.maximum(length - 2.0 * accel.offset_distance(light_point), 0.0)
+        dirs[aim] = towards / np.maximum(length, 1e-30)[:, None]
+        far[aim] = length - 2.0 * accel.offset_distance(light_point)
     if ray_log is not None:
         ray_log.append(("shadow", start, dirs, far))
     t0 = time.perf_counter()
@@ -114,11 +122,11 @@ def direct_irradiance(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng
     visible = ~blocked
     visible &= far > 0
     offset = 0
-    for tgt, group in zip(targets, groups):
-        size = len(tgt)
+    for group in groups:
+        size = len(group[2])
         weight = group[3] * visible[offset:offset + size]
         offset += size
-        scalar = weight if group[0] is None else np.bincount(tgt, weights=weight, minlength=count)
+        scalar = weight if group[0] is None else np.bincount(group[0], weights=weight, minlength=count)
         irradiance += scalar[:, None] * np.asarray(group[4], np.float64)[None]
     if stats is not None:
         stats["shadow_rays"] = stats.get("shadow_rays", 0) + len(org)

@@ -113,8 +113,10 @@ class TriangleEmitter:
 
     kind = "mesh"
 
-    def __init__(self, name: str, triangles: np.ndarray, radiance: np.ndarray, two_sided: bool):
+    def __init__(self, name: str, triangles: np.ndarray, radiance: np.ndarray, two_sided: bool,
+                 in_bvh: bool = False):
         self.name = name
+        self.in_bvh = in_bvh   # an emissive mesh is also geometry: shadow rays must stop short
         self.tris = np.asarray(triangles, np.float64).reshape(-1, 3, 3)
         self.rgb = np.asarray(radiance, np.float64).reshape(3)   # one radiance per emitter
         self.two_sided = two_sided
@@ -378,7 +380,7 @@ class LightSet:
                     name = scene.object_names[oid] if oid < len(scene.object_names) else "Mesh"
                     self.sampled.append(TriangleEmitter(
                         name, scene.triangles[sel], table["exitance"][mid].astype(np.float64) / np.pi,
-                        two_sided=bool(table["both_sides"][mid])))
+                        two_sided=bool(table["both_sides"][mid]), in_bvh=True))
         else:
             self.emissive_triangles = np.zeros(0, bool)
         if not scene.world.is_black:

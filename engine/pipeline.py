@@ -121,7 +121,7 @@ def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArr
     origins, directions, tmax = pixel_rays(scene.camera, p0, p1, spp, rng, settings.filter_width)
     count = len(origins)
     radiance = np.zeros((count, 3))
-    throughput = np.ones((count, 3))
+    throughput = np.ones((count, 3), np.float32) if arrays.has_specular else None
     ray_of = np.arange(count)
     world = scene.world.radiance
     for depth in range(settings.max_specular_depth + 1):
@@ -136,12 +136,13 @@ def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArr
         hit = prim >= 0
         all_hit = bool(hit.all())
         if not all_hit and not scene.world.is_black:
-            radiance[ray_of[~hit]] += throughput[~hit] * world
+            radiance[ray_of[~hit]] += world if throughput is None else throughput[~hit] * world
         if not hit.any():
             break
         if not all_hit:
             prim, bu, bv, t_hit = prim[hit], bu[hit], bv[hit], _t[hit]
-            d, o, rays, thr = directions[hit], origins[hit], ray_of[hit], throughput[hit]
+            d, o, rays = directions[hit], origins[hit], ray_of[hit]
+            thr = None if throughput is None else throughput[hit]
         else:
             t_hit, d, o, rays, thr = _t, directions, origins, ray_of, throughput
         x = o + t_hit[:, None] * d
@@ -163,7 +164,7 @@ def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArr
 
         if arrays.has_emission:
             emitted = arrays.emitted_radiance[mat] * (front | arrays.both_sides[mat])[:, None]
-            radiance[rays] += thr * emitted
+            radiance[rays] += emitted if thr is None else thr * emitted
 
         diffuse = arrays.is_diffuse[mat]
         if diffuse.all():
