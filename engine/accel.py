@@ -27,6 +27,8 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from .sampling import dot_rows, scale_rows
+
 MISS = -1
 OFFSET_SCALE = 2e-5
 
@@ -79,16 +81,24 @@ class Accelerator:
         """Closest hits. Returns (t float32 (N,), prim int32 (N,) with -1 for a miss,
         u float32, v float32): hit point = (1-u-v) p0 + u p1 + v p2."""
         n = len(origins)
-        t = np.full(n, np.inf, np.float32)
-        prim = np.full(n, MISS, np.int32)
-        u = np.zeros(n, np.float32)
-        v = np.zeros(n, np.float32)
         if n == 0 or self._embree is None:
-            return t, prim, u, v
+            return (np.full(n, np.inf, np.float32), np.full(n, MISS, np.int32),
+                    np.zeros(n, np.float32), np.zeros(n, np.float32))
         org = np.ascontiguousarray(origins, dtype=np.float32)
         dirs = np.ascontiguousarray(directions, dtype=np.float32)
         far = None if tmax is None else np.broadcast_to(np.asarray(tmax, np.float32), (n,))
         start = time.perf_counter()
+        if n <= self.chunk:
+            # One Embree call: return its arrays as they are, without copies.
+            dists = np.full(n, 1e37, np.float32) if far is None else np.array(far, np.float32)
+            out = self._embree.run(org, dirs, dists, output=1)
+            self.trace_seconds += time.perf_counter() - start
+            self.rays_traced += n
+            return out["tfar"], out["primID"], out["u"], out["v"]
+        t = np.empty(n, np.float32)
+        prim = np.empty(n, np.int32)
+        u = np.empty(n, np.float32)
+        v = np.empty(n, np.float32)
 
         def run(a, b):
             dists = np.full(b - a, 1e37, np.float32) if far is None else np.array(far[a:b], np.float32)
@@ -128,19 +138,24 @@ class Accelerator:
     # Geometry helpers -----------------------------------------------------------------------
     def offset_distance(self, points: np.ndarray) -> np.ndarray:
         """Self-intersection offset [m] for each point (N,): relative to |p| and the extent."""
-        a = np.abs(points)
-        mag = np.maximum(a[:, 0], a[:, 1])
-        np.maximum(mag, a[:, 2], out=mag)
+        mag = np.abs(points[:, 0])                 # max |coordinate|, a column at a time
+        tmp = np.abs(points[:, 1])
+        np.maximum(mag, tmp, out=mag)
+        np.maximum(mag, np.abs(points[:, 2], out=tmp), out=mag)
         np.maximum(mag, 1e-2 * self.extent, out=mag)
         mag *= OFFSET_SCALE
         return mag
 
     def offset_origins(self, points: np.ndarray, normals: np.ndarray,
-                       directions: np.ndarray) -> np.ndarray:
-        """Push points off their surface along the normal, on the side ``directions`` leave."""
-        eps = self.offset_distance(points)
-        eps = np.where(np.einsum("ij,ij->i", normals, directions) >= 0, eps, -eps)
-        return points + normals * eps[:, None].astype(points.dtype, copy=False)
+                       directions: np.ndarray, eps: np.ndarray | None = None) -> np.ndarray:
+        """Push points off their surface along the normal, on the side ``directions`` leave.
+        ``eps``: ``offset_distance(points)`` when the caller has it already."""
+        if eps is None:
+            eps = self.offset_distance(points)
+        eps = np.where(dot_rows(normals, directions) >= 0, eps, -eps).astype(points.dtype, copy=False)
+        out = scale_rows(normals, eps)
+        out += points
+        return out
 
     def hit_points(self, prim: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """World positions of hits from barycentrics (float64), for prim >= 0."""

@@ -41,21 +41,35 @@ def pixel_rays(camera, pixel_start: int, pixel_stop: int, samples: int, rng: np.
     # Stratified positions: every pixel visits each of its strata once (the order of the
     # strata carries no information, so no per-pixel shuffle is needed).
     u = sampling.stratified_2d(len(pix), samples, rng, shuffle=False)          # (P, S, 2)
-    off = sampling.filter_offsets(u, filter_width)
-    count = len(pix) * samples
-    local = np.empty((count, 3), np.float32)
+    off = sampling.filter_offsets(u, filter_width, out=u if u.dtype == np.float32 else None)
     scale_x = np.float32(2.0 * camera.tan_half_x / full_w)
     scale_y = np.float32(2.0 * camera.tan_half_y / full_h)
-    local[:, 0] = ((px[:, None] + 0.5 + off[..., 0]) * scale_x).reshape(-1)
-    local[:, 0] += np.float32(camera.shift_x - camera.tan_half_x)
-    local[:, 1] = ((py[:, None] + 0.5 + off[..., 1]) * scale_y).reshape(-1)
-    local[:, 1] += np.float32(camera.shift_y - camera.tan_half_y)
-    local[:, 2] = -1.0
+    # Position on the plane z = -1 in camera space: pixel centre (per pixel) plus offset.
+    # Work on flat (P*S,) columns: fast, unlike broadcasting over a last axis of 3.
+    cx = ((px + 0.5) * scale_x + (camera.shift_x - camera.tan_half_x)).astype(np.float32)
+    cy = ((py + 0.5) * scale_y + (camera.shift_y - camera.tan_half_y)).astype(np.float32)
+    lx = off[..., 0] * scale_x
+    lx += cx[:, None]
+    ly = off[..., 1] * scale_y
+    ly += cy[:, None]
+    lx, ly = lx.reshape(-1), ly.reshape(-1)
     m = camera.matrix
     rotation = (m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0)).astype(np.float32)  # no scale
-    world = local @ rotation.T                      # on the plane z = -1, not yet unit
-    length = np.sqrt(np.einsum("ij,ij->i", world, world))
-    origins = m[:3, 3].astype(np.float32) + world * np.float32(camera.clip_start)  # near plane
-    directions = world / length[:, None]
+    position = m[:3, 3].astype(np.float32)
+    clip_start = np.float32(camera.clip_start)
+    count = len(lx)
+    origins = np.empty((count, 3), np.float32)
+    directions = np.empty((count, 3), np.float32)
+    tmp = np.empty(count, np.float32)
+    for c in range(3):
+        # World-space column c of (lx, ly, -1) rotated: on the plane z = -1, not yet unit.
+        world = directions[:, c]
+        np.multiply(lx, rotation[c, 0], out=world)
+        world += np.multiply(ly, rotation[c, 1], out=tmp)
+        world -= rotation[c, 2]
+        np.multiply(world, clip_start, out=origins[:, c])        # on the near plane
+        origins[:, c] += position[c]
+    length = np.sqrt(sampling.dot_rows(directions, directions))
+    sampling.scale_rows(directions, np.float32(1.0) / length, out=directions)
     tmax = np.float32(camera.clip_end - camera.clip_start) * length
     return origins, directions, tmax

@@ -38,10 +38,29 @@ def direct_irradiance(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng
     ``offset_normals`` (default ``n``) are the geometric normals used to push shadow-ray
     origins off the surface; ``stats`` receives ``shadow_rays`` and ``trace_seconds``.
     """
-    count = len(x)
+    terms = direct_terms(x, n, lights, accel, rng, light_samples, stats, offset_normals, ray_log)
+    return irradiance_from_terms(terms, len(x))
+
+
+def irradiance_from_terms(terms, count: int) -> np.ndarray:
+    """Sum the ``direct_terms`` of ``count`` points into irradiance (count, 3)."""
     irradiance = np.zeros((count, 3))
+    for target, scalar, rgb in terms:
+        if target is not None:
+            scalar = np.bincount(target, weights=scalar, minlength=count)
+        irradiance += scalar[:, None] * np.asarray(rgb, np.float64)[None]
+    return irradiance
+
+
+def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.random.Generator,
+                 light_samples: int = 4, stats: dict | None = None,
+                 offset_normals: np.ndarray | None = None, ray_log: list | None = None) -> list:
+    """Irradiance as a list of terms (target, scalar, rgb): term i adds ``scalar * rgb`` to
+    points ``target`` (None: every point, in order). Callers that weight the irradiance per
+    point (albedo, pixel) can then do so on scalars instead of (N, 3) arrays."""
+    count = len(x)
     if count == 0 or lights.empty:
-        return irradiance
+        return []
 
     # Each entry: (target points, directions, distances, scalar weights, rgb of the light).
     groups = []
@@ -80,7 +99,7 @@ def direct_irradiance(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng
                                getattr(light, 'in_bvh', False)))
 
     if not groups:
-        return irradiance
+        return []
     single = len(groups) == 1 and groups[0][0] is None
     if single:
         target = None
@@ -93,15 +112,16 @@ def direct_irradiance(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng
         dist = np.concatenate([g[2] for g in groups])
         org = x[target]
         normals = (n if offset_normals is None else offset_normals)[target]
-    start = accel.offset_origins(org, normals, dirs)
-    far = np.full(len(org), 1e37, np.float32)
+    eps = accel.offset_distance(org)
+    start = accel.offset_origins(org, normals, dirs, eps=eps)
     finite = np.isfinite(dist)
     # Rays to points and to lights that are not geometry: stop an offset short of the light.
     if finite.all():
-        far[:] = dist
-        far -= accel.offset_distance(org)
-    elif finite.any():
-        far[finite] = dist[finite] - accel.offset_distance(org[finite])
+        far = np.subtract(dist, eps, dtype=np.float32)
+    else:
+        far = np.full(len(org), 1e37, np.float32)
+        if finite.any():
+            far[finite] = dist[finite] - eps[finite]
     # Rays to emissive meshes end on geometry of the BVH: aim from the offset origin at the
     # sampled point itself and stop short of it by its own offset, so that neither the
     # receiver nor the emitter shadows the ray.
@@ -118,17 +138,16 @@ def direct_irradiance(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng
     blocked = accel.occluded(start, dirs, far)
     traced = time.perf_counter() - t0
 
-    # Accumulate weight x rgb per light group for the rays that got through.
+    # One term per light group: its weights for the rays that got through.
     visible = ~blocked
     visible &= far > 0
+    terms = []
     offset = 0
     for group in groups:
         size = len(group[2])
-        weight = group[3] * visible[offset:offset + size]
+        terms.append((group[0], group[3] * visible[offset:offset + size], group[4]))
         offset += size
-        scalar = weight if group[0] is None else np.bincount(group[0], weights=weight, minlength=count)
-        irradiance += scalar[:, None] * np.asarray(group[4], np.float64)[None]
     if stats is not None:
         stats["shadow_rays"] = stats.get("shadow_rays", 0) + len(org)
         stats["trace_seconds"] = stats.get("trace_seconds", 0.0) + traced
-    return irradiance
+    return terms

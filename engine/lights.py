@@ -51,11 +51,14 @@ def _normalize(v):
 
 def _towards(pos, x):
     """Unit directions from points x to ``pos``, distances and 1/r^2 (column-wise, fast)."""
-    d = pos.astype(x.dtype) - x
-    r2 = np.einsum("ij,ij->i", d, d)
+    d = np.empty_like(x)
+    for c in range(3):                       # pos - x, a column at a time (fast)
+        np.subtract(x.dtype.type(pos[c]), x[:, c], out=d[:, c])
+    r2 = sampling.dot_rows(d, d)
     np.maximum(r2, 1e-30, out=r2)
     r = np.sqrt(r2)
-    return d / r[:, None], r, 1.0 / r2
+    sampling.scale_rows(d, 1.0 / r, out=d)
+    return d, r, 1.0 / r2
 
 
 def spot_mask(cos_axis: np.ndarray, cos_half: float, blend: float) -> np.ndarray:
@@ -409,8 +412,10 @@ class LightSet:
         irradiance before visibility = weight * rgb. A generator, so callers batch the rays."""
         for pos, intensity in zip(self.points_pos, self.points_intensity):
             w, r, inv_r2 = _towards(pos, x)
-            cos_x = np.einsum("ij,ij->i", n, w)
-            yield w, r, np.maximum(cos_x, 0.0) * inv_r2, intensity
+            cos_x = sampling.dot_rows(n, w)
+            np.maximum(cos_x, 0.0, out=cos_x)
+            cos_x *= inv_r2
+            yield w, r, cos_x, intensity
         for pos, axis, intensity, cos_half, blend, _name in self.spots:
             w, r, inv_r2 = _towards(pos, x)
             cos_x = np.einsum("ij,ij->i", n, w)

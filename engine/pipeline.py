@@ -43,7 +43,7 @@ import numpy as np
 from . import sampling
 from .accel import Accelerator
 from .camera import pixel_rays
-from .direct import direct_irradiance
+from .direct import direct_terms, irradiance_from_terms
 from .lights import LightSet
 from .scene import Scene, SceneError
 
@@ -106,6 +106,20 @@ class _SceneArrays:
         self.is_specular = np.any(self.specular > 0, axis=1)
         self.has_specular = bool(np.any(self.specular > 0))
         self.has_emission = bool(np.any(self.emitted_radiance > 0))
+        self.material_count = len(self.diffuse)
+
+
+def _add_to_pixels(pixels: np.ndarray, pixel_of: np.ndarray | None, values: np.ndarray):
+    """pixels[pixel_of[i]] += values[i] (values (n, 3)); pixel_of None: all samples in order."""
+    if pixel_of is None:
+        pixels += values.reshape(len(pixels), -1, 3).sum(axis=1)
+        return
+    for c in range(3):
+        pixels[:, c] += np.bincount(pixel_of, weights=values[:, c], minlength=len(pixels))
+
+
+# Above this many materials the per-(pixel, material) histogram of the diffuse term gets big.
+MAX_HISTOGRAM_MATERIALS = 64
 
 
 def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArrays,
@@ -120,7 +134,8 @@ def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArr
     spp = settings.samples
     origins, directions, tmax = pixel_rays(scene.camera, p0, p1, spp, rng, settings.filter_width)
     count = len(origins)
-    radiance = np.zeros((count, 3))
+    # Sums of the samples' radiance per pixel: every contribution goes straight to its pixel.
+    pixel_sums = np.zeros((p1 - p0, 3))
     throughput = np.ones((count, 3), np.float32) if arrays.has_specular else None
     ray_of = np.arange(count)
     world = scene.world.radiance
@@ -136,7 +151,9 @@ def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArr
         hit = prim >= 0
         all_hit = bool(hit.all())
         if not all_hit and not scene.world.is_black:
-            radiance[ray_of[~hit]] += world if throughput is None else throughput[~hit] * world
+            missed = np.broadcast_to(world, (int((~hit).sum()), 3)) if throughput is None \
+                else throughput[~hit] * world
+            _add_to_pixels(pixel_sums, ray_of[~hit] // spp, missed)
         if not hit.any():
             break
         if not all_hit:
@@ -145,11 +162,16 @@ def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArr
             thr = None if throughput is None else throughput[hit]
         else:
             t_hit, d, o, rays, thr = _t, directions, origins, ray_of, throughput
-        x = o + t_hit[:, None] * d
-        ng = arrays.geometric_normals[prim]
-        facing = np.einsum("ij,ij->i", ng, d)
+        # Samples in order (primary rays, all hit): pixel sums need no index.
+        in_order = depth == 0 and all_hit
+        pixel_of = None if in_order else rays // spp
+        x = sampling.scale_rows(d, t_hit)
+        x += o
+        ng = np.take(arrays.geometric_normals, prim, axis=0)  # take: faster than ng[prim]
+        facing = sampling.dot_rows(ng, d)
         front = facing < 0                                   # the ray meets the wound front side
-        ng *= np.where(front, 1.0, -1.0).astype(np.float32)[:, None]   # towards the viewer
+        if not front.all():                                  # turn ng towards the viewer
+            sampling.scale_rows(ng, np.where(front, np.float32(1), np.float32(-1)), out=ng)
         if arrays.shading_normals is not None:
             corner = arrays.shading_normals[prim]
             w = np.stack([1.0 - bu - bv, bu, bv], axis=1)[..., None]
@@ -164,7 +186,7 @@ def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArr
 
         if arrays.has_emission:
             emitted = arrays.emitted_radiance[mat] * (front | arrays.both_sides[mat])[:, None]
-            radiance[rays] += emitted if thr is None else thr * emitted
+            _add_to_pixels(pixel_sums, pixel_of, emitted if thr is None else thr * emitted)
 
         diffuse = arrays.is_diffuse[mat]
         if diffuse.all():
@@ -175,18 +197,31 @@ def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArr
             idx = None
         if idx is not None:
             shadow_stats = {}
-            e = direct_irradiance(x[idx], ns[idx], lights, accel, rng, settings.light_samples,
-                                  stats=shadow_stats, offset_normals=ng[idx], ray_log=ray_log)
+            terms = direct_terms(x[idx], ns[idx], lights, accel, rng, settings.light_samples,
+                                 stats=shadow_stats, offset_normals=ng[idx], ray_log=ray_log)
             stats["shadow_rays"] += shadow_stats.get("shadow_rays", 0)
             stats["trace_seconds"] += shadow_stats.get("trace_seconds", 0.0)
-            e *= arrays.diffuse_over_pi[mat[idx]]
-            if depth > 0:
-                e *= thr[idx]
-                radiance[rays[idx]] += e
-            elif isinstance(idx, slice) and len(rays) == count:
-                radiance += e
-            else:
-                radiance[rays[idx]] += e
+            mat_d = mat[idx]
+            materials = arrays.material_count
+            if depth == 0 and materials <= MAX_HISTOGRAM_MATERIALS:
+                # Outgoing radiance rho_d / pi * E, summed per pixel: a (pixel, material)
+                # histogram of each term's scalar weights times the materials' rho_d / pi * rgb.
+                if pixel_of is None:
+                    key = np.repeat(np.arange(len(pixel_sums), dtype=np.int32) * materials, spp)[idx]
+                else:
+                    key = pixel_of[idx] * materials
+                key += mat_d
+                for target, scalar, rgb in terms:
+                    hist = np.bincount(key if target is None else key[target], weights=scalar,
+                                       minlength=len(pixel_sums) * materials)
+                    pixel_sums += hist.reshape(-1, materials) @ (arrays.diffuse_over_pi * rgb)
+            elif terms:
+                e = irradiance_from_terms(terms, len(mat_d))
+                e *= arrays.diffuse_over_pi[mat_d]
+                if depth > 0:
+                    e *= thr[idx]
+                in_order_d = pixel_of is None and isinstance(idx, slice)
+                _add_to_pixels(pixel_sums, None if in_order_d else (rays // spp)[idx], e)
 
         if not arrays.has_specular or depth == settings.max_specular_depth:
             break
@@ -203,7 +238,7 @@ def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArr
         throughput = thr[idx] * rho_s[idx]
         ray_of = rays[idx]
 
-    pixels = radiance.reshape(-1, spp, 3).mean(axis=1)
+    pixels = pixel_sums / spp
     stats["seconds"] = time.perf_counter() - started
     return pixels, stats
 

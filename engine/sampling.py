@@ -47,9 +47,15 @@ def stratified_2d(groups: int, count: int, rng: np.random.Generator,
     u = rng.random((groups, count, 2), dtype=np.float32).astype(np.float64, copy=False) \
         if shuffle else rng.random((groups, count, 2), dtype=np.float32)
     side = int(round(np.sqrt(count)))
-    if side * side == count and count > 1:
-        cells = (np.argsort(rng.random((groups, count)), axis=1) if shuffle
-                 else np.arange(count)[None])
+    if side * side == count and count > 1 and not shuffle:
+        # Same grid for every group: add the cell corners as one flat row per group.
+        cells = np.arange(count)
+        corner = np.stack([cells % side, cells // side], axis=1).astype(u.dtype).reshape(1, -1)
+        flat = u.reshape(groups, -1)
+        flat += corner
+        flat /= side
+    elif side * side == count and count > 1:
+        cells = np.argsort(rng.random((groups, count)), axis=1)
         u[..., 0] = (cells % side + u[..., 0]) / side
         u[..., 1] = (cells // side + u[..., 1]) / side
     elif count > 1:
@@ -57,6 +63,27 @@ def stratified_2d(groups: int, count: int, rng: np.random.Generator,
             perm = np.argsort(rng.random((groups, count)), axis=1)
             u[..., axis] = (perm + u[..., axis]) / count
     return u
+
+
+# Row-wise helpers for (N, 3) vectors. numpy broadcasts over a last axis of 3 slowly (one
+# inner loop per row), so these work on the three columns instead (one loop over N each).
+def dot_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise dot products of (N, 3) arrays: (N,)."""
+    out = a[:, 0] * b[:, 0]
+    tmp = a[:, 1] * b[:, 1]
+    out += tmp
+    np.multiply(a[:, 2], b[:, 2], out=tmp)
+    out += tmp
+    return out
+
+
+def scale_rows(a: np.ndarray, s: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """a * s[:, None] for a (N, 3) and s (N,); ``out`` may be ``a``."""
+    if out is None:
+        out = np.empty(a.shape, np.result_type(a, s))
+    for c in range(3):
+        np.multiply(a[:, c], s, out=out[:, c])
+    return out
 
 
 def orthonormal_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -131,18 +158,19 @@ def _blackman_harris_inverse_cdf(width: float, table_size: int = 4096) -> np.nda
 _FILTER_TABLES: dict[float, np.ndarray] = {}
 
 
-def filter_offsets(u: np.ndarray, width: float = 1.5) -> np.ndarray:
+def filter_offsets(u: np.ndarray, width: float = 1.5, out: np.ndarray | None = None) -> np.ndarray:
     """Map uniform [0,1) numbers to pixel offsets distributed like the Blackman-Harris filter.
 
     Separable in x and y, as Cycles samples its filter table (4096 equal-probability bins,
     finer than 1/1000 px at the default width); a width of 0 gives a box filter of one
     pixel. Offsets are in pixels about the pixel centre, float32.
+    ``out`` (float32, may be ``u``) receives the offsets.
     """
     if width <= 0:
         return (u - 0.5).astype(np.float32)
     table = _FILTER_TABLES.get(width)
     if table is None:
         table = _FILTER_TABLES[width] = _blackman_harris_inverse_cdf(width)
-    index = (u * len(table)).astype(np.int32)
-    np.minimum(index, len(table) - 1, out=index)
-    return table[index]
+    # Bin index, truncated straight into int32; mode="clip" maps u = 1 to the last bin.
+    index = np.multiply(u, np.float32(len(table)), out=np.empty(u.shape, np.int32), casting="unsafe")
+    return np.take(table, index, mode="clip", out=out)
