@@ -33,6 +33,18 @@ MISS = -1
 OFFSET_SCALE = 2e-5
 
 
+def offset_distance(points: np.ndarray, extent: float) -> np.ndarray:
+    """Self-intersection offset [m] for each point (N,): ``OFFSET_SCALE`` times the larger of
+    its largest |coordinate| and 1 % of the scene's ``extent``."""
+    mag = np.abs(points[:, 0])                 # max |coordinate|, a column at a time
+    tmp = np.abs(points[:, 1])
+    np.maximum(mag, tmp, out=mag)
+    np.maximum(mag, np.abs(points[:, 2], out=tmp), out=mag)
+    np.maximum(mag, 1e-2 * extent, out=mag)
+    mag *= OFFSET_SCALE
+    return mag
+
+
 class Accelerator:
     """An Embree BVH over the scene's triangles with batched, threaded queries."""
 
@@ -137,14 +149,8 @@ class Accelerator:
 
     # Geometry helpers -----------------------------------------------------------------------
     def offset_distance(self, points: np.ndarray) -> np.ndarray:
-        """Self-intersection offset [m] for each point (N,): relative to |p| and the extent."""
-        mag = np.abs(points[:, 0])                 # max |coordinate|, a column at a time
-        tmp = np.abs(points[:, 1])
-        np.maximum(mag, tmp, out=mag)
-        np.maximum(mag, np.abs(points[:, 2], out=tmp), out=mag)
-        np.maximum(mag, 1e-2 * self.extent, out=mag)
-        mag *= OFFSET_SCALE
-        return mag
+        """Self-intersection offset [m] for each point (N,): see :func:`offset_distance`."""
+        return offset_distance(points, self.extent)
 
     def offset_origins(self, points: np.ndarray, normals: np.ndarray,
                        directions: np.ndarray, eps: np.ndarray | None = None) -> np.ndarray:
@@ -156,10 +162,3 @@ class Accelerator:
         out = scale_rows(normals, eps)
         out += points
         return out
-
-    def hit_points(self, prim: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """World positions of hits from barycentrics (float64), for prim >= 0."""
-        tri = self.triangles[prim].astype(np.float64)
-        u = u.astype(np.float64)[:, None]
-        v = v.astype(np.float64)[:, None]
-        return tri[:, 0] * (1.0 - u - v) + tri[:, 1] * u + tri[:, 2] * v

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import sampling
-from .accel import OFFSET_SCALE
+from .accel import offset_distance
 from .lights import LUMINANCE, area_light_triangles, spot_mask
 from .scene import AreaLight, PointLight, Scene, SpotLight, SunLight
 
@@ -146,7 +146,7 @@ def emit_photons(scene: Scene, count: int, rng: np.random.Generator) -> EmittedP
             nrm[flip] *= -1
             d = _cosine_directions(nrm, v)
             # Leave the emitting surface (it is geometry too), as accel.offset_origins does.
-            eps = OFFSET_SCALE * np.maximum(np.abs(o).max(axis=1), 1e-2 * scene.extent)
+            eps = offset_distance(o, scene.extent)
             o = o + nrm * eps[:, None]
             # Per-photon colour: each triangle's exitance, normalised to the meshes' flux.
             m = table["exitance"][scene.material_ids[tri_idx[pick]]].astype(np.float64)
