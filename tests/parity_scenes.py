@@ -1,4 +1,4 @@
-"""Small bpy scenes, built by code, for direct-light parity with Cycles.
+"""Small bpy scenes, built by code, for parity with Cycles: direct light, and one GI scene.
 
 Every builder starts from ``bpy.ops.wm.read_factory_settings(use_empty=True)`` and makes the
 same set: a floor, a back wall and a rotated box (so that every light casts a shadow on both
@@ -20,6 +20,22 @@ x in [-6, 6], z in [0, 5], facing -y; box 0.8 x 0.8 x 0.8 standing on the floor 
 (0.3, 0.2), turned 30 degrees about z. Camera at (0, -5, 2.2) looking at (0, 0.5, 0.6),
 horizontal field of view 50 degrees. Floor and wall fill the whole frame.
 
+Global illumination (``GI_SCENES``, for the all-bounce references of ``make_cycles_refs.py
+--gi``; kept apart so that ``SCENES`` and the direct-light tests do not see them):
+
+- ``cornell`` (:func:`build_cornell`): a Cornell-box-like room x in [-1, 1], y in [-1, 1],
+  z in [0, 2], open at the front (y = -1, where the camera looks in). Floor, ceiling and back
+  wall white ``CORNELL_COLOURS["white"]`` = 0.75, left wall (x = -1) red (0.63, 0.065, 0.05),
+  right wall (x = 1) green (0.14, 0.45, 0.091); a tall white box 0.6 x 0.6 x 1.2 at
+  (-0.33, 0.3) turned 15 degrees and a short one 0.6 x 0.6 x 0.6 at (0.35, -0.3) turned -18
+  degrees, both standing on the floor without a bottom face (nothing coplanar, nothing
+  overlapping). All Diffuse BSDF, roughness 0 (Lambertian). One square AREA light 0.5 m,
+  ``CORNELL_POWER`` W, spread 180 degrees, normalize on, 1 cm below the ceiling at its centre,
+  facing down, invisible to the camera (``Object.visible_camera = False``: Lanterna does not
+  draw area lights seen directly; it still lights the room). Black world. Camera at
+  (0, -3.4, 1) looking at (0, 0, 1), horizontal FOV 60 degrees: the open front fills the
+  height of the frame, black margins on both sides. ``CORNELL_RESOLUTION`` = 80 x 60.
+
 Only ``bpy`` and ``mathutils``: no import of Lanterna, so the reference script can use it
 without the add-on.
 """
@@ -38,7 +54,16 @@ COLOURS = {
 }
 WORLD_GREY = 0.25       # radiance of the constant world in the "world" scene [W m^-2 sr^-1]
 
-__all__ = ["SCENES", "RESOLUTION", "COLOURS", "WORLD_GREY", "build", "lights_out_of_frame"]
+CORNELL_RESOLUTION = (80, 60)
+CORNELL_COLOURS = {
+    "white": (0.75, 0.75, 0.75),
+    "red": (0.63, 0.065, 0.05),
+    "green": (0.14, 0.45, 0.091),
+}
+CORNELL_POWER = 30.0    # W, area light: lit walls at radiance ~0.1-1 with all bounces
+
+__all__ = ["SCENES", "GI_SCENES", "RESOLUTION", "COLOURS", "WORLD_GREY", "CORNELL_RESOLUTION",
+           "CORNELL_COLOURS", "CORNELL_POWER", "build", "build_cornell", "lights_out_of_frame"]
 
 
 # --- building blocks ----------------------------------------------------------------------
@@ -267,9 +292,63 @@ SCENES = {
 }
 
 
+# --- global illumination ------------------------------------------------------------------
+def _cornell_box(name, size, location, angle_deg, material):
+    """A box ``size`` = (sx, sy, sz) standing on z = 0 at ``location`` (x, y), turned about z;
+    five outward quads (no bottom face: it would lie on the floor)."""
+    hx, hy, hz = (s / 2 for s in size)
+    corners = [(x, y, z) for z in (0.0, 2 * hz) for y in (-hy, hy) for x in (-hx, hx)]
+    faces = [(4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+    obj = _mesh_object(name, corners, faces, material)
+    obj.location = (*location, 0.0)
+    obj.rotation_euler = (0.0, 0.0, math.radians(angle_deg))
+    return obj
+
+
+def build_cornell():
+    """Cornell-box-like room with a square area light under the ceiling (see the module
+    docstring); all bounces matter: the ceiling is lit only indirectly."""
+    scene = _reset()
+    scene.render.resolution_x, scene.render.resolution_y = CORNELL_RESOLUTION
+    white = _material_diffuse("White", CORNELL_COLOURS["white"])
+    red = _material_diffuse("Red", CORNELL_COLOURS["red"])
+    green = _material_diffuse("Green", CORNELL_COLOURS["green"])
+    x0, x1, y0, y1, z0, z1 = -1.0, 1.0, -1.0, 1.0, 0.0, 2.0
+    face = [(0, 1, 2, 3)]                  # quads listed with their normals pointing inwards
+    _mesh_object("Floor", [(x0, y0, z0), (x1, y0, z0), (x1, y1, z0), (x0, y1, z0)], face, white)
+    _mesh_object("Ceiling", [(x0, y0, z1), (x0, y1, z1), (x1, y1, z1), (x1, y0, z1)], face, white)
+    _mesh_object("Wall Back", [(x0, y1, z0), (x1, y1, z0), (x1, y1, z1), (x0, y1, z1)], face, white)
+    _mesh_object("Wall Left", [(x0, y0, z0), (x0, y1, z0), (x0, y1, z1), (x0, y0, z1)], face, red)
+    _mesh_object("Wall Right", [(x1, y0, z0), (x1, y0, z1), (x1, y1, z1), (x1, y1, z0)], face,
+                 green)
+    _cornell_box("Tall Box", (0.6, 0.6, 1.2), (-0.33, 0.3), 15.0, white)
+    _cornell_box("Short Box", (0.6, 0.6, 0.6), (0.35, -0.3), -18.0, white)
+
+    light = _light(scene, "Area", "AREA", (0.0, 0.0, z1 - 0.01), rotation=(0.0, 0.0, 0.0),
+                   energy=CORNELL_POWER, shape="SQUARE", size=0.5, spread=math.radians(180.0),
+                   normalize=True)                    # local -Z = down
+    light.visible_camera = False
+
+    cam_data = bpy.data.cameras.new("Camera")
+    cam_data.sensor_fit = "AUTO"
+    cam_data.angle = math.radians(60.0)    # horizontal (the wider side with fit AUTO)
+    cam_data.clip_start = 0.05
+    cam = bpy.data.objects.new("Camera", cam_data)
+    scene.collection.objects.link(cam)
+    _look_at(cam, (0.0, -3.4, 1.0), (0.0, 0.0, 1.0))
+    scene.camera = cam
+    return scene
+
+
+GI_SCENES = {
+    "cornell": build_cornell,
+}
+
+
 def build(name: str):
-    """Build scene ``name`` into a fresh file and return the bpy scene."""
-    scene = SCENES[name]()
+    """Build scene ``name`` (of ``SCENES`` or ``GI_SCENES``) into a fresh file and return the
+    bpy scene."""
+    scene = (SCENES[name] if name in SCENES else GI_SCENES[name])()
     bpy.context.view_layer.update()
     return scene
 

@@ -1,10 +1,13 @@
-"""Cycles reference data for direct-light parity, and measured Cycles conventions.
+"""Cycles reference data for direct-light and all-bounce (GI) parity; measured Cycles conventions.
 
 Run from the repository root with the project's virtualenv (bpy 5.0.1, Cycles CPU)::
 
     .venv/bin/python tests/data/make_cycles_refs.py                 # all references
     .venv/bin/python tests/data/make_cycles_refs.py point spot      # some of them
     .venv/bin/python tests/data/make_cycles_refs.py --conventions   # the conventions table
+    .venv/bin/python tests/data/make_cycles_refs.py --gi            # all-bounce references
+    .venv/bin/python tests/data/make_cycles_refs.py --gi cornell    # one of them
+    (``--samples N`` overrides the samples per seed, for trials)
 
 References: every scene of ``tests/parity_scenes.py`` is rendered by Cycles on the CPU with
 direct light only (``max_bounces = 0``: measured to leave an indirectly lit wall at exactly 0
@@ -30,7 +33,21 @@ of the image). Written to ``tests/data/cycles_direct/``:
 ``conventions.json``
     the measured Cycles conventions (``--conventions``), see ``tests/data/README.md``.
 
-The core of Lanterna is not imported: only bpy, numpy, OpenEXR and ``tests/parity_scenes``.
+Global illumination (``--gi``): the same, with all bounces, into ``tests/data/cycles_gi/``
+(``<scene>.npz`` with the same fields and ``manifest.json``, which adds each scene's
+resolution and builder). Scenes ``GI_SCENES``: ``scene1``, the seed's Scene 1
+(``lanterna.engine.blender.seed_scenes.build("scene1")``: closed box, radius-0 point light,
+Diffuse BSDF, black world) rendered at 160 x 120 with its own camera; ``cornell``,
+``tests/parity_scenes.py:build_cornell`` (80 x 60, square area light hidden from the camera).
+Settings as above except ``max_bounces = diffuse_bounces = glossy_bounces =
+transmission_bounces = GI_BOUNCES`` (64), volume 0, transparent 8, caustics reflective and
+refractive on, ``blur_glossy = 0``, path guiding off; ``GI_SAMPLES[name]`` samples per seed,
+chosen so that every bright block's relative SE is < 0.3 % (measured 0.16 % and 0.11 %).
+Lights inside the frame are allowed only if Cycles does not draw them (radius-0 point/spot
+lights, ``visible_camera = False``).
+
+The core of Lanterna is not imported: only bpy, numpy, OpenEXR and ``tests/parity_scenes``
+(and, for ``--gi scene1``, Lanterna's bpy scene builder ``engine/blender/seed_scenes.py``).
 """
 from __future__ import annotations
 
@@ -61,10 +78,49 @@ SAMPLES = {          # per seed; every bright block's relative SE comes out < 0.
     "world": 4096,
 }
 
+# --gi: all bounces, written to cycles_gi/
+OUT_GI = HERE / "cycles_gi"
+GI_BOUNCES = 64
+GI_SCENES = ("scene1", "cornell")
+GI_SAMPLES = {       # per seed; every bright block's relative SE comes out < 0.3 %
+    "scene1": 768,
+    "cornell": 2560,
+}
+GI_RESOLUTION = {"scene1": (160, 120)}   # others: the builder's own
+
+
+def _build_gi(name: str):
+    """(scene, builder label) of GI scene ``name``: the seed's Scene 1 (Lanterna's own
+    builder, imported here only: bpy scene code, not the renderer) or a GI scene of
+    ``tests/parity_scenes.py``, at ``GI_RESOLUTION`` where given."""
+    if name == "scene1":
+        from lanterna.engine.blender import seed_scenes
+        scene = seed_scenes.build("scene1")
+        label = "engine/blender/seed_scenes.py:build_scene1"
+    else:
+        scene = parity_scenes.build(name)
+        label = f"tests/parity_scenes.py:{parity_scenes.GI_SCENES[name].__name__}"
+    if name in GI_RESOLUTION:
+        scene.render.resolution_x, scene.render.resolution_y = GI_RESOLUTION[name]
+        scene.render.resolution_percentage = 100
+        label += " at {}x{}".format(*GI_RESOLUTION[name])
+    bpy.context.view_layer.update()
+    # Lights Cycles does not draw may sit in the frame: radius-0 point/spot lights and lights
+    # hidden from the camera.
+    inside = [n for n in parity_scenes.lights_out_of_frame(scene)
+              if scene.objects[n].visible_camera
+              and not (scene.objects[n].type == "LIGHT" and scene.objects[n].data.type in
+                       ("POINT", "SPOT") and scene.objects[n].data.shadow_soft_size == 0.0)]
+    if inside:
+        raise RuntimeError(f"{name}: visible lights inside the camera frame: {inside}")
+    return scene, label
+
 
 # --- Cycles set-up and reading the render ---------------------------------------------------
-def configure_cycles(scene, samples: int, seed: int) -> dict:
-    """Direct light only, unbiased, deterministic. Returns the settings as a dict."""
+def configure_cycles(scene, samples: int, seed: int, gi: bool = False) -> dict:
+    """Direct light only (``gi`` False) or all bounces (``gi`` True: ``GI_BOUNCES`` diffuse,
+    glossy and transmission bounces, caustics on, no glossy blur), unbiased, deterministic.
+    Returns the settings as a dict."""
     scene.render.engine = "CYCLES"
     c = scene.cycles
     c.device = "CPU"
@@ -86,6 +142,14 @@ def configure_cycles(scene, samples: int, seed: int) -> dict:
     c.filter_width = 1.5
     c.caustics_reflective = False
     c.caustics_refractive = False
+    if gi:
+        c.max_bounces = GI_BOUNCES
+        c.diffuse_bounces = GI_BOUNCES
+        c.glossy_bounces = GI_BOUNCES
+        c.transmission_bounces = GI_BOUNCES
+        c.caustics_reflective = True
+        c.caustics_refractive = True
+        c.blur_glossy = 0.0
     c.use_guiding = False
     scene.render.film_transparent = False
     scene.render.use_persistent_data = False
@@ -98,6 +162,10 @@ def configure_cycles(scene, samples: int, seed: int) -> dict:
         "use_adaptive_sampling", "sample_clamp_direct", "sample_clamp_indirect",
         "light_sampling_threshold", "pixel_filter_type", "filter_width", "sampling_pattern",
         "use_light_tree", "direct_light_sampling_type")}
+    if gi:
+        settings.update({k: getattr(c, k) for k in (
+            "glossy_bounces", "transmission_bounces", "volume_bounces", "transparent_max_bounces",
+            "caustics_reflective", "caustics_refractive", "blur_glossy", "use_guiding")})
     settings["resolution"] = [scene.render.resolution_x, scene.render.resolution_y]
     return settings
 
@@ -135,15 +203,23 @@ def block_means(image: np.ndarray, grid=GRID) -> np.ndarray:
 
 
 # --- references -----------------------------------------------------------------------------
-def make_reference(name: str, tmpdir: str) -> dict:
-    samples = SAMPLES.get(name, DEFAULT_SAMPLES)
+def make_reference(name: str, tmpdir: str, gi: bool = False) -> dict:
+    """Render scene ``name`` with every seed and write ``<scene>.npz`` into ``cycles_direct/``
+    (``gi`` False: a scene of ``parity_scenes.SCENES``, direct light) or ``cycles_gi/`` (``gi``
+    True: a name of ``GI_SCENES``, all bounces). Returns the manifest entry."""
+    samples = GI_SAMPLES[name] if gi else SAMPLES.get(name, DEFAULT_SAMPLES)
+    out = OUT_GI if gi else OUT
     renders, seconds, settings = [], [], None
     for seed in SEEDS:
-        scene = parity_scenes.build(name)
-        inside = parity_scenes.lights_out_of_frame(scene)
-        if inside:
-            raise RuntimeError(f"{name}: lights inside the camera frame: {inside}")
-        settings = configure_cycles(scene, samples, seed)
+        if gi:
+            scene, builder = _build_gi(name)
+        else:
+            scene = parity_scenes.build(name)
+            builder = f"tests/parity_scenes.py:{parity_scenes.SCENES[name].__name__}"
+            inside = parity_scenes.lights_out_of_frame(scene)
+            if inside:
+                raise RuntimeError(f"{name}: lights inside the camera frame: {inside}")
+        settings = configure_cycles(scene, samples, seed, gi=gi)
         img, dt = render_exr(scene, os.path.join(tmpdir, f"{name}_{seed}.exr"))
         renders.append(img)
         seconds.append(dt)
@@ -159,10 +235,10 @@ def make_reference(name: str, tmpdir: str) -> dict:
     region_se_pixels = np.sqrt(block_means(pixel_var)) / math.sqrt(npix)
     settings = dict(settings, seeds=list(SEEDS), seed="see seeds", blender=bpy.app.version_string,
                     render_seconds=[round(s, 2) for s in seconds], grid=list(GRID),
-                    scene=name, builder=f"tests/parity_scenes.py:{parity_scenes.SCENES[name].__name__}")
-    OUT.mkdir(parents=True, exist_ok=True)
+                    scene=name, builder=builder)
+    out.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(
-        OUT / f"{name}.npz", image=image.astype(np.float32), region_mean=region_mean,
+        out / f"{name}.npz", image=image.astype(np.float32), region_mean=region_mean,
         region_se=region_se, region_se_pixels=region_se_pixels, seed_region_means=seed_blocks,
         grid=np.array(GRID), settings=json.dumps(settings))
     peak = float(region_mean.max())
@@ -182,6 +258,9 @@ def make_reference(name: str, tmpdir: str) -> dict:
             f"{(np.where(bright, 0, region_se).max() / peak):.3g}"),
         "max_seed_to_seed_block_spread_over_peak": float(f"{spread:.3g}"),
     }
+    if gi:
+        summary["resolution"] = [w, h]
+        summary["builder"] = builder
     print(f"{name:22s} {samples:5d} spp x {k} seeds, {summary['seconds_per_render']:.2f} s/render,"
           f" rel SE max {summary['max_rel_se_bright_regions']:.2e}"
           f" (pixel est. {summary['max_rel_se_pixels_estimate']:.2e})", flush=True)
@@ -585,7 +664,19 @@ def main(argv=None):
     parser.add_argument("scenes", nargs="*", help="scene names (default: all)")
     parser.add_argument("--conventions", action="store_true",
                         help="measure the Cycles conventions into conventions.json instead")
+    parser.add_argument("--gi", action="store_true",
+                        help=f"all-bounce references of {list(GI_SCENES)} into cycles_gi/")
+    parser.add_argument("--samples", type=int, default=None,
+                        help="override the samples per seed (trials)")
     args = parser.parse_args(argv)
+    if args.samples is not None:
+        for table in (SAMPLES, GI_SAMPLES):
+            for key in set(table) | set(args.scenes):
+                table[key] = args.samples
+        global DEFAULT_SAMPLES
+        DEFAULT_SAMPLES = args.samples
+    if args.gi:
+        return main_gi(parser, args)
     OUT.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmpdir:
         if args.conventions:
@@ -609,6 +700,23 @@ def main(argv=None):
             "resolution": list(parity_scenes.RESOLUTION),
             "made_by": "tests/data/make_cycles_refs.py"}
         manifest_path.write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n")
+
+
+def main_gi(parser, args):
+    names = args.scenes or list(GI_SCENES)
+    unknown = [n for n in names if n not in GI_SCENES]
+    if unknown:
+        parser.error(f"unknown GI scenes {unknown}; known: {list(GI_SCENES)}")
+    OUT_GI.mkdir(parents=True, exist_ok=True)
+    manifest_path = OUT_GI / "manifest.json"
+    manifest = json.loads(manifest_path.read_text()) if manifest_path.exists() else {}
+    with tempfile.TemporaryDirectory() as tmpdir:
+        for name in names:
+            manifest[name] = make_reference(name, tmpdir, gi=True)
+    manifest["_meta"] = {
+        "blender": bpy.app.version_string, "grid": list(GRID), "seeds": list(SEEDS),
+        "bounces": GI_BOUNCES, "made_by": "tests/data/make_cycles_refs.py --gi"}
+    manifest_path.write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n")
 
 
 if __name__ == "__main__":
