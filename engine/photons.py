@@ -13,7 +13,9 @@ What it computes (seed sections 9.1-9.5, corrections in DESIGN.md §4)
         Embree; at each hit Russian roulette (9.2) with the channel-averaged reflectances
         Pd, Ps chooses diffuse / specular / absorb and scales the survivor's RGB power by
         rho / P per channel, so colour stays unbiased. Photons are stored at diffuse hits.
-        ``max_bounces`` caps the path so a white (rho = 1) enclosure ends.
+        ``max_bounces`` caps the path so a white (rho = 1) enclosure ends. Bookkeeping per
+        RGB channel: emitted = absorbed + escaped + capped in expectation, where absorbed
+        adds (1 - rho_d - rho_s) x the power of every hit.
     ``PhotonMap``  compact float32/float16 arrays (36 bytes a photon), a kd-tree from a
         library (pykdtree or scipy's cKDTree, whichever is faster here), and the radiance
         estimate of Eq. 9.11 with the seed's filters: photons arriving from below the surface
@@ -37,6 +39,31 @@ from . import sampling
 from .accel import offset_distance
 from .lights import LUMINANCE, area_light_triangles, spot_mask
 from .scene import AreaLight, PointLight, Scene, SpotLight, SunLight
+
+
+def _spread_bits(v: np.ndarray) -> np.ndarray:
+    """10-bit integers (uint32) -> their bits at every third position (30 bits)."""
+    v = (v | (v << 16)) & 0x030000FF
+    v = (v | (v << 8)) & 0x0300F00F
+    v = (v | (v << 4)) & 0x030C30C3
+    return (v | (v << 2)) & 0x09249249
+
+
+def morton_order(points: np.ndarray, lo=None, hi=None) -> np.ndarray:
+    """Permutation that sorts ``points`` (N, 3) along a Z-order (Morton) curve of 1024^3
+    cells over [lo, hi]. Photons stored in this order and queries asked in this order touch
+    memory that is close together: measured here 175k against 30k k=50 queries a second."""
+    p = np.asarray(points, np.float32)
+    if len(p) == 0:
+        return np.zeros(0, np.int64)
+    lo = p.min(axis=0) if lo is None else np.asarray(lo, np.float32)
+    hi = p.max(axis=0) if hi is None else np.asarray(hi, np.float32)
+    scale = np.float32(1023.0) / np.maximum(hi - lo, np.float32(1e-30))
+    cells = np.clip((p - lo) * scale, 0, 1023).astype(np.uint32)
+    code = _spread_bits(cells[:, 0])
+    code |= _spread_bits(cells[:, 1]) << 1
+    code |= _spread_bits(cells[:, 2]) << 2
+    return np.argsort(code)
 
 
 @dataclass
@@ -163,9 +190,13 @@ def emit_photons(scene: Scene, count: int, rng: np.random.Generator) -> EmittedP
                           np.concatenate(powers), per_light)
 
 
+ESTIMATE_CHUNK = 8192           # queries per kd-tree call in PhotonMap.irradiance
+
+
 @dataclass
 class PhotonMap:
-    """Stored photons: 36 bytes each (float32 position and power, float16 directions)."""
+    """Stored photons: 36 bytes each (float32 position and power, float16 directions, a byte
+    of bounces), and a kd-tree over their positions."""
 
     positions: np.ndarray       # (P, 3) float32 [m]
     power: np.ndarray           # (P, 3) float32 [W]
@@ -173,7 +204,11 @@ class PhotonMap:
     normals: np.ndarray         # (P, 3) float16, surface normal on the side it arrived
     bounces: np.ndarray         # (P,) uint8 diffuse/specular bounces before it was stored
     stats: dict = field(default_factory=dict)
+    library: str = "pykdtree"
     _tree: object = None
+    _directions: np.ndarray | None = None    # (P, 6) float16: incoming | normal, for look-ups
+    lo: np.ndarray | None = None             # bounds of the positions (Morton order)
+    hi: np.ndarray | None = None
 
     def __len__(self):
         return len(self.positions)
@@ -183,115 +218,258 @@ class PhotonMap:
         return sum(a.nbytes for a in (self.positions, self.power, self.incoming, self.normals,
                                       self.bounces))
 
+    def subset(self, keep: np.ndarray) -> "PhotonMap":
+        """A new (unbuilt) map of the photons where ``keep`` is true; stats are copied."""
+        return PhotonMap(self.positions[keep], self.power[keep], self.incoming[keep],
+                         self.normals[keep], self.bounces[keep], dict(self.stats), self.library)
+
     def build(self, library: str = "pykdtree"):
+        """Build the kd-tree (``pykdtree``, default, or ``scipy``: scipy's cKDTree). Measured
+        here at 1M photons: pykdtree builds in 0.20 s against cKDTree's 0.66 s and answers
+        k = 50 queries as fast (63k/s against 65k/s on 2 cores), so pykdtree is the default."""
         t0 = time.perf_counter()
+        self.library = library
+        if len(self):
+            # Store the photons in Morton order: neighbours in space are neighbours in memory.
+            order = morton_order(self.positions)
+            for key in ("positions", "power", "incoming", "normals", "bounces"):
+                setattr(self, key, np.take(getattr(self, key), order, axis=0))
+            self.lo = self.positions.min(axis=0)
+            self.hi = self.positions.max(axis=0)
         if len(self) == 0:
             self._tree = None
         elif library == "pykdtree":
             from pykdtree.kdtree import KDTree
-            self._tree = KDTree(self.positions.astype(np.float32), leafsize=16)
-        else:
+            self._tree = KDTree(np.ascontiguousarray(self.positions, np.float32), leafsize=16)
+        elif library == "scipy":
             from scipy.spatial import cKDTree
             self._tree = cKDTree(self.positions, leafsize=16)
-        self.library = library
+        else:
+            raise ValueError(f"unknown kd-tree library {library!r} (pykdtree or scipy)")
+        self._directions = np.ascontiguousarray(np.concatenate([self.incoming, self.normals], axis=1))
         self.stats["build_seconds"] = time.perf_counter() - t0
+        self.stats["library"] = library
         return self
 
-    def query(self, points: np.ndarray, k: int):
-        """Distances and indices of the k nearest photons (k clipped to the map's size)."""
+    def query(self, points: np.ndarray, k: int, max_radius: float = np.inf):
+        """Distances (N, k) float32 and indices (N, k) of the k nearest photons within
+        ``max_radius`` (k clipped to the map's size). Missing neighbours: distance inf and
+        index ``len(self)``."""
         k = int(min(k, len(self)))
+        bound = None if not np.isfinite(max_radius) else float(max_radius)
         if self.library == "pykdtree":
-            dist, idx = self._tree.query(np.ascontiguousarray(points, np.float32), k=k)
+            dist, idx = self._tree.query(np.ascontiguousarray(points, np.float32), k=k,
+                                         distance_upper_bound=bound)
+            idx = idx.astype(np.int64)
         else:
-            dist, idx = self._tree.query(points, k=k, workers=-1)
-        return dist.reshape(len(points), k), idx.reshape(len(points), k)
+            dist, idx = self._tree.query(points, k=k, workers=-1,
+                                         distance_upper_bound=np.inf if bound is None else bound)
+        dist = np.asarray(dist, np.float32).reshape(len(points), k)
+        idx = idx.reshape(len(points), k)
+        missing = ~np.isfinite(dist)
+        if missing.any():
+            idx[missing] = len(self)
+        return dist, idx
 
     def irradiance(self, points, normals, k=50, max_radius=np.inf, disc_thickness=0.25,
-                   min_bounces=0):
+                   min_bounces=0, cone_filter: float | None = None, stats: dict | None = None):
         """Irradiance estimate E (N, 3) [W/m^2] at ``points`` on the side ``normals`` face.
 
         Eq. 9.11 over the k nearest photons within ``max_radius``: photons that arrived from
         below the surface, whose surface faces the other way, or that lie farther than
         ``disc_thickness`` x radius from the tangent plane (Fig. 9.5) are left out; the
-        radius is the k-th distance, or ``max_radius`` when fewer photons lie within it.
+        radius r is the k-th distance (that photon itself is not counted: (k - 1) / (pi r^2)
+        is the unbiased k-nearest-neighbour density), or ``max_radius`` when fewer photons
+        lie within it (all of them count).
         ``min_bounces`` = 1 keeps only photons that bounced at least once (indirect light).
+        ``cone_filter`` = k_c (Jensen 1996, k_c >= 1, typically 1.1) weights each photon by
+        1 - d / (k_c r) and normalises by 1 - 2 / (3 k_c): sharper edges, a little more noise.
+        ``stats`` (a dict) receives ``queries`` and ``query_seconds``.
         """
         e = np.zeros((len(points), 3))
         if self._tree is None or len(points) == 0:
             return e
-        dist, idx = self.query(points, k)
-        radius = np.minimum(dist[:, -1], max_radius)
-        radius = np.where(np.isfinite(radius) & (radius > 0), radius, max_radius)
-        pos = self.positions[idx].astype(np.float64)                  # (N, k, 3)
-        offset = pos - points[:, None, :]
-        height = np.abs(np.einsum("nkj,nj->nk", offset, normals))
-        arriving = np.einsum("nkj,nj->nk", self.incoming[idx].astype(np.float32), normals) < 0
-        same_side = np.einsum("nkj,nj->nk", self.normals[idx].astype(np.float32), normals) > 0.5
-        keep = (dist <= radius[:, None]) & arriving & same_side & (height <= disc_thickness * radius[:, None])
+        # Ask in Morton order (coherent tree walks and gathers), in chunks that bound memory.
+        order = morton_order(points, self.lo, self.hi)
+        points32 = np.ascontiguousarray(points, np.float32)[order]
+        normals32 = np.ascontiguousarray(normals, np.float32)[order]
+        out = np.empty((len(points), 3))
+        for a in range(0, len(points), ESTIMATE_CHUNK):
+            b = min(a + ESTIMATE_CHUNK, len(points))
+            out[a:b] = self._estimate(points32[a:b], normals32[a:b], k, max_radius,
+                                      disc_thickness, min_bounces, cone_filter, stats)
+        e[order] = out
+        return e
+
+    def _estimate(self, points32, n32, k, max_radius, disc_thickness, min_bounces, cone_filter,
+                  stats):
+        t0 = time.perf_counter()
+        dist, idx = self.query(points32, k, max_radius)
+        if stats is not None:
+            stats["queries"] = stats.get("queries", 0) + len(points32)
+            stats["query_seconds"] = stats.get("query_seconds", 0.0) + time.perf_counter() - t0
+        count, k = dist.shape
+        full = np.isfinite(dist[:, -1])
+        radius = np.where(full, dist[:, -1], np.float32(min(max_radius, 3e38)))
+        found = idx < len(self)
+        flat = np.where(found, idx, 0).reshape(-1)
+        # np.take on flat indices: several times faster than fancy indexing of rows.
+        offset = np.take(self.positions, flat, axis=0).reshape(count, k, 3)
+        offset -= points32[:, None, :]
+        height = np.abs(np.matmul(offset, n32[:, :, None])[..., 0])
+        dirs = np.take(self._directions, flat, axis=0).reshape(count, k, 6).astype(np.float32)
+        facing = np.matmul(dirs.reshape(count, 2 * k, 3), n32[:, :, None]).reshape(count, k, 2)
+        keep = found & (facing[..., 0] < 0) & (facing[..., 1] > 0.5)     # arriving, same side
+        keep &= height <= disc_thickness * radius[:, None]
         if min_bounces:
-            keep &= self.bounces[idx] >= min_bounces
-        flux = np.einsum("nk,nkc->nc", keep.astype(np.float64), self.power[idx].astype(np.float64))
-        area = np.pi * radius ** 2
-        return flux / np.where(area > 0, area, np.inf)[:, None]
+            keep &= np.take(self.bounces, flat).reshape(count, k) >= min_bounces
+        # The k-th photon only marks the radius: leave it out, as (k - 1) / (pi r_k^2) is the
+        # unbiased density of k-nearest-neighbour estimation (k / (pi r_k^2) is k / (k - 1)
+        # too bright: +2 % at k = 50, measured on a sphere lit from its centre).
+        keep[:, -1] &= ~full
+        weight = keep.astype(np.float32)
+        if cone_filter:
+            kc = float(cone_filter)
+            weight *= np.maximum(0.0, 1.0 - dist / (kc * radius[:, None]))
+            norm = 1.0 - 2.0 / (3.0 * kc)
+        else:
+            norm = 1.0
+        power = np.take(self.power, flat, axis=0).reshape(count, k, 3)
+        flux = np.matmul(weight[:, None, :], power)[:, 0].astype(np.float64)
+        area = norm * np.pi * radius.astype(np.float64) ** 2
+        ok = np.isfinite(area) & (area > 0)
+        flux[~ok] = 0.0
+        flux[ok] /= area[ok, None]
+        return flux
+        t0 = time.perf_counter()
+        points32 = np.ascontiguousarray(points, np.float32)
+        dist, idx = self.query(points32, k, max_radius)
+        if stats is not None:
+            stats["queries"] = stats.get("queries", 0) + len(points)
+            stats["query_seconds"] = stats.get("query_seconds", 0.0) + time.perf_counter() - t0
+        full = np.isfinite(dist[:, -1])
+        radius = np.where(full, dist[:, -1], np.float32(min(max_radius, 3e38)))
+        found = idx < len(self)
+        safe = np.where(found, idx, 0)
+        n32 = np.ascontiguousarray(normals, np.float32)
+        offset = self.positions[safe]
+        offset -= points32[:, None, :]
+        height = np.abs(np.einsum("nkj,nj->nk", offset, n32))
+        dirs = self._directions[safe].astype(np.float32)                # (N, k, 6)
+        arriving = np.einsum("nkj,nj->nk", dirs[..., :3], n32) < 0
+        same_side = np.einsum("nkj,nj->nk", dirs[..., 3:], n32) > 0.5
+        keep = found & arriving & same_side & (height <= disc_thickness * radius[:, None])
+        if min_bounces:
+            keep &= self.bounces[safe] >= min_bounces
+        # The k-th photon only marks the radius: leave it out, as (k - 1) / (pi r_k^2) is the
+        # unbiased density of k-nearest-neighbour estimation (k / (pi r_k^2) is k / (k - 1)
+        # too bright: +2 % at k = 50, measured on a sphere lit from its centre).
+        keep[:, -1] &= ~full
+        weight = keep.astype(np.float32)
+        if cone_filter:
+            kc = float(cone_filter)
+            weight *= np.maximum(0.0, 1.0 - dist / (kc * radius[:, None]))
+            norm = 1.0 - 2.0 / (3.0 * kc)
+        else:
+            norm = 1.0
+        flux = np.einsum("nk,nkc->nc", weight, self.power[safe]).astype(np.float64)
+        area = norm * np.pi * radius.astype(np.float64) ** 2
+        ok = np.isfinite(area) & (area > 0)
+        e[ok] = flux[ok] / area[ok, None]
+        return e
 
 
 def trace_photons(scene: Scene, accel, emitted: EmittedPhotons, rng: np.random.Generator,
                   max_bounces: int = 64) -> PhotonMap:
-    """Trace emitted photons (Russian roulette, 9.2) and store them at diffuse hits."""
+    """Trace emitted photons (Russian roulette, 9.2) and store them at diffuse hits.
+
+    All photons advance together: one Embree call per bounce for every live photon. Geometry
+    is float32 (Embree's precision); powers stay float64 until they are stored. A photon that
+    survives its ``max_bounces``-th bounce is counted in ``capped_paths`` / ``flux_capped``."""
     table = scene.material_table()
     rho_d = table["diffuse"].astype(np.float64)
     rho_s = table["specular"].astype(np.float64)
     p_d = rho_d.mean(axis=1)
     p_s = rho_s.mean(axis=1)
-    normals_geo = scene.geometric_normals().astype(np.float64)
-    o, d, power = emitted.origins.copy(), emitted.directions.copy(), emitted.power.copy()
+    p_ds = p_d + p_s
+    absorb = np.clip(1.0 - rho_d - rho_s, 0.0, 1.0)
+    # Survivors' power scale per material: rho / P per channel (colour stays unbiased).
+    scale_d = rho_d / np.where(p_d > 0, p_d, 1.0)[:, None]
+    scale_s = rho_s / np.where(p_s > 0, p_s, 1.0)[:, None]
+    normals_geo = scene.geometric_normals().astype(np.float32)
+    stores_at = p_d > 0                           # materials where photons are stored
+    o = np.ascontiguousarray(emitted.origins, np.float32)
+    d = np.ascontiguousarray(emitted.directions, np.float32)
+    power = emitted.power.copy()
     depth = np.zeros(len(o), np.int32)
     stored = {"positions": [], "power": [], "incoming": [], "normals": [], "bounces": []}
     absorbed = np.zeros(3)
     escaped = np.zeros(3)
     capped = 0
     capped_power = np.zeros(3)
+    rays = 0
     while len(o):
-        _t, prim, _u, _v = accel.intersect(o, d)
+        rays += len(o)
+        t, prim, _u, _v = accel.intersect(o, d)
         hit = prim >= 0
-        escaped += power[~hit].sum(axis=0)
-        o, d, power, prim, depth, t = o[hit], d[hit], power[hit], prim[hit], depth[hit], _t[hit]
-        if len(o) == 0:
-            break
-        x = o + t[:, None].astype(np.float64) * d
-        n = normals_geo[prim]
-        n = np.where((np.einsum("ij,ij->i", n, d) < 0)[:, None], n, -n)    # towards the photon
+        if not hit.all():
+            escaped += power[~hit].sum(axis=0)
+            keep = np.flatnonzero(hit)
+            if len(keep) == 0:
+                break
+            o, d, t, prim = (np.take(a, keep, axis=0) for a in (o, d, t, prim))
+            power, depth = np.take(power, keep, axis=0), depth[keep]
+        x = sampling.scale_rows(d, t)
+        x += o
+        n = np.take(normals_geo, prim, axis=0)
+        flip = sampling.dot_rows(n, d) > 0                 # turn n towards the photon
+        if flip.any():
+            n[flip] *= -1
         mat = scene.material_ids[prim]
-        diffuse = p_d[mat] > 0
-        if np.any(diffuse):
-            stored["positions"].append(x[diffuse].astype(np.float32))
-            stored["power"].append(power[diffuse].astype(np.float32))
-            stored["incoming"].append(d[diffuse].astype(np.float16))
-            stored["normals"].append(n[diffuse].astype(np.float16))
-            stored["bounces"].append(np.minimum(depth[diffuse], 255).astype(np.uint8))
+        diffuse = stores_at[mat]
+        if diffuse.all():
+            sel = slice(None)
+        else:
+            sel = np.flatnonzero(diffuse)
+        if not isinstance(sel, np.ndarray) or len(sel):
+            stored["positions"].append(x[sel].copy() if isinstance(sel, slice) else x[sel])
+            stored["power"].append(power[sel].astype(np.float32))
+            stored["incoming"].append(d[sel].astype(np.float16))
+            stored["normals"].append(n[sel].astype(np.float16))
+            stored["bounces"].append(np.minimum(depth[sel], 255).astype(np.uint8))
         # Russian roulette with channel-averaged reflectances.
         xi = rng.random(len(o))
         go_diffuse = xi < p_d[mat]
-        go_specular = ~go_diffuse & (xi < p_d[mat] + p_s[mat])
-        dead = ~(go_diffuse | go_specular)
-        absorbed += power[dead].sum(axis=0)
-        new_dir = np.empty_like(d)
-        if np.any(go_diffuse):
-            new_dir[go_diffuse] = _cosine_directions(n[go_diffuse], rng.random((int(go_diffuse.sum()), 2)))
-            power[go_diffuse] *= rho_d[mat[go_diffuse]] / p_d[mat[go_diffuse]][:, None]
-        if np.any(go_specular):
-            ds, ns = d[go_specular], n[go_specular]
-            new_dir[go_specular] = ds - 2 * np.einsum("ij,ij->i", ds, ns)[:, None] * ns
-            power[go_specular] *= rho_s[mat[go_specular]] / p_s[mat[go_specular]][:, None]
-        alive = ~dead
-        depth = depth + 1
+        alive = xi < p_ds[mat]
+        # Absorbed flux, per channel: the expected share (1 - rho_d - rho_s) of every hit.
+        # (The power of the photons roulette kills is no estimate of it per channel: with
+        # channel-averaged probabilities a green floor would "absorb" as much red as green.)
+        absorbed += np.einsum("ij,ij->j", power, absorb[mat])
+        depth += 1
         over = alive & (depth > max_bounces)
-        if np.any(over):
+        if over.any():
             capped += int(over.sum())
             capped_power += power[over].sum(axis=0)
             alive &= ~over
-        o = accel.offset_origins(x[alive], n[alive], new_dir[alive])
-        d, power, depth = new_dir[alive], power[alive], depth[alive]
+        live = np.flatnonzero(alive)
+        if len(live) == 0:
+            break
+        x, n, d, mat = (np.take(a, live, axis=0) for a in (x, n, d, mat))
+        power, depth, go_diffuse = np.take(power, live, axis=0), depth[live], go_diffuse[live]
+        if go_diffuse.all():
+            d = sampling.cosine_directions(n, rng.random((len(live), 2)))
+            power *= np.take(scale_d, mat, axis=0)
+        else:
+            spec = ~go_diffuse
+            new_dir = np.empty_like(d)
+            if go_diffuse.any():
+                new_dir[go_diffuse] = sampling.cosine_directions(
+                    n[go_diffuse], rng.random((int(go_diffuse.sum()), 2)))
+            ds, ns = d[spec], n[spec]
+            new_dir[spec] = ds - 2 * sampling.dot_rows(ds, ns)[:, None] * ns
+            power *= np.where(go_diffuse[:, None], scale_d[mat], scale_s[mat])
+            d = new_dir
+        o = accel.offset_origins(x, n, d)
 
     def cat(key, dtype, width):
         parts = stored[key]
@@ -306,7 +484,124 @@ def trace_photons(scene: Scene, accel, emitted: EmittedPhotons, rng: np.random.G
         "flux_absorbed": absorbed.tolist(), "flux_escaped": escaped.tolist(),
         "flux_stored_first_hit": (pmap.power[pmap.bounces == 0].astype(np.float64).sum(axis=0).tolist()
                                   if len(pmap) else [0.0, 0.0, 0.0]),
-        "capped_paths": capped, "flux_capped": capped_power.tolist(),
+        "capped_paths": capped, "flux_capped": capped_power.tolist(), "rays": rays,
         "photons_per_light": emitted.per_light, "bytes": pmap.nbytes,
+    })
+    return pmap
+
+
+# --- The photon pass: emission, tracing in parallel chunks, one map ------------------------
+PHOTON_CHUNK = 1 << 17            # photons traced per task: ~0.1 s, so cancel acts quickly
+MIN_AUTO_PHOTONS = 200_000
+MAX_AUTO_PHOTONS = 2_000_000
+
+
+def auto_photon_count(pixels: int) -> int:
+    """Default photon count: two per pixel of the render window, between 200k and 2M."""
+    return int(np.clip(2 * int(pixels), MIN_AUTO_PHOTONS, MAX_AUTO_PHOTONS))
+
+
+def auto_max_radius(scene: Scene, stored: int, k: int) -> float:
+    """Default cap on the gather radius [m]: four times the radius that holds ``k`` photons
+    when the ``stored`` photons spread evenly over the scene's diffuse surface area. The cap
+    only matters where photons are sparse (dark corners); elsewhere the k-th neighbour sets
+    the radius."""
+    table = scene.material_table()
+    if len(scene.triangles) == 0 or stored == 0:
+        return max(scene.extent, 1e-9) * 0.05
+    diffuse = np.any(table["diffuse"][scene.material_ids] > 0, axis=1)
+    area = float(scene.triangle_areas()[diffuse].sum())
+    if not area > 0:
+        return max(scene.extent, 1e-9) * 0.05
+    return float(4.0 * np.sqrt(k * area / (np.pi * stored)))
+
+
+def _concatenate(maps: list) -> PhotonMap:
+    cat = lambda key: np.concatenate([getattr(m, key) for m in maps])
+    out = PhotonMap(cat("positions"), cat("power"), cat("incoming"), cat("normals"), cat("bounces"))
+    stats = {}
+    for m in maps:
+        for key, value in m.stats.items():
+            if key == "photons_per_light":
+                continue
+            if isinstance(value, list):
+                stats[key] = (np.asarray(stats.get(key, np.zeros(len(value)))) + value).tolist()
+            elif isinstance(value, (int, float)):
+                stats[key] = stats.get(key, 0) + value
+    stats["bytes"] = out.nbytes
+    out.stats = stats
+    return out
+
+
+def build_photon_map(scene: Scene, accel, count: int, seed: int = 0, max_bounces: int = 64,
+                     keep: str = "all", library: str = "pykdtree", workers: int = 1,
+                     pool=None, progress=None, cancelled=None) -> PhotonMap:
+    """Emit ``count`` photons, trace them in chunks of ``PHOTON_CHUNK`` on ``pool`` (or a new
+    pool of ``workers`` threads), keep ``"all"`` stored photons or only the ``"indirect"``
+    ones (bounced at least once: what the ``full`` mode adds to exact direct light), and
+    build the kd-tree. ``stats`` hold the energy bookkeeping: flux emitted / absorbed /
+    escaped / capped [W, RGB], photons per light, stored counts, memory and times.
+
+    Chunk i traces with its own random stream (seed, STREAM_PHOTON, i + 1), so a fixed seed
+    gives the same map whatever the scheduling. ``progress(fraction)`` is called after each
+    chunk and ``cancelled()`` polled; a cancelled pass returns the photons traced so far."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    t0 = time.perf_counter()
+    emitted = emit_photons(scene, count, sampling.rng_for(seed, sampling.STREAM_PHOTON, 0))
+    emit_seconds = time.perf_counter() - t0
+    n = len(emitted.origins)
+    bounds = [(a, min(a + PHOTON_CHUNK, n)) for a in range(0, n, PHOTON_CHUNK)]
+
+    def trace(i):
+        a, b = bounds[i]
+        part = EmittedPhotons(emitted.origins[a:b], emitted.directions[a:b], emitted.power[a:b])
+        return trace_photons(scene, accel, part, sampling.rng_for(seed, sampling.STREAM_PHOTON, i + 1),
+                             max_bounces=max_bounces)
+
+    t0 = time.perf_counter()
+    maps, was_cancelled = [], False
+    own_pool = pool is None and workers > 1 and len(bounds) > 1
+    executor = ThreadPoolExecutor(workers) if own_pool else pool
+    try:
+        if executor is None:
+            results = (trace(i) for i in range(len(bounds)))
+        else:
+            results = executor.map(trace, range(len(bounds)))
+        for i, part in enumerate(results):
+            maps.append(part)
+            if progress is not None:
+                progress((i + 1) / len(bounds))
+            if cancelled is not None and cancelled():
+                was_cancelled = True
+                break
+    finally:
+        if own_pool:
+            executor.shutdown(wait=True, cancel_futures=True)
+    trace_seconds = time.perf_counter() - t0
+    pmap = _concatenate(maps) if maps else PhotonMap(*(np.zeros((0, 3), np.float32),) * 2,
+                                                    np.zeros((0, 3), np.float16), np.zeros((0, 3), np.float16),
+                                                    np.zeros(0, np.uint8))
+    stored_all = len(pmap)
+    direct_flux = pmap.power[pmap.bounces == 0].astype(np.float64).sum(axis=0)
+    indirect_flux = pmap.power[pmap.bounces > 0].astype(np.float64).sum(axis=0)
+    if keep == "indirect":
+        pmap = pmap.subset(pmap.bounces > 0)
+    elif keep != "all":
+        raise ValueError(f"keep must be 'all' or 'indirect', not {keep!r}")
+    traced = emitted.power[:bounds[len(maps) - 1][1]] if maps else emitted.power[:0]
+    pmap.build(library)
+    stats = pmap.stats
+    stats.update({
+        "requested": int(count), "emitted": int(len(traced)), "cancelled": was_cancelled,
+        "flux_emitted": traced.sum(axis=0).tolist(),
+        "flux_lights": emitted.power.sum(axis=0).tolist(),
+        "photons_per_light": emitted.per_light,
+        "stored_all": int(stored_all), "stored": int(len(pmap)), "kept": keep,
+        "flux_stored_direct": direct_flux.tolist(), "flux_stored_indirect": indirect_flux.tolist(),
+        "bytes": int(pmap.nbytes), "bytes_per_photon": round(pmap.nbytes / max(len(pmap), 1), 2),
+        "max_bounces": int(max_bounces),
+        "emit_seconds": emit_seconds, "trace_seconds": trace_seconds,
+        "chunks": len(bounds),
     })
     return pmap
