@@ -8,9 +8,15 @@ Stages, in order (DESIGN.md §1)
     1. ``validate``     check the scene, drop untraceable triangles (counted, named)
     2. ``accel_build``  Embree BVH over all triangles
     3. ``lights``       sort lights into exactly evaluated and sampled ones
-    4. ``camera``       primary rays in batches of whole pixels; at each hit the emission, the
-                        direct light (``engine/direct.py``) and, on perfect specular surfaces,
-                        the reflected ray (up to ``max_specular_depth``)
+    4. ``photons``      emit, trace and store photons, build the kd-tree (``engine/photons.py``;
+                        skipped when ``bounces`` = 0 in ``full`` mode, or when nothing emits)
+    5. ``camera``       primary rays in batches of whole pixels; at each diffuse hit the
+                        emission plus, by ``mode``:
+                        ``full``: exact direct light (``engine/direct.py``) + indirect light
+                        from the photon map (photons that bounced at least once);
+                        ``photon-map``: the photon-map estimate of all light (seed 9.5).
+                        Perfect specular surfaces reflect the camera ray (up to
+                        ``max_specular_depth``).
 
     Batches are independent (each has its own random stream from (seed, batch)), so they run
     on a thread pool (embreex and numpy release the GIL) and a fixed seed gives the same
@@ -21,9 +27,20 @@ Settings (``RenderSettings``)
     =====================  ========  ===========================================================
     name                   default   meaning
     =====================  ========  ===========================================================
+    mode                   full      ``full`` (direct + photon-map indirect) or ``photon-map``
     samples                16        camera samples per pixel
     light_samples          4         samples per shading point shared by area/mesh/world lights
-    bounces                0         indirect bounces; 0 = direct light only
+    bounces                64        most bounces of light; 0 = direct light only. Photon paths
+                                     end after this many bounces (counted in the report)
+    photons                0         photons emitted; 0 = automatic: 2 per pixel, 200k-2M
+    photon_k               50        photons per estimate (k nearest, Eq. 9.11)
+    photon_radius          0.0       cap on the estimate's radius [m]; 0 = automatic (4x the
+                                     radius holding k photons spread evenly over the scene)
+    photon_filter          none      ``none`` or ``cone`` (Jensen's cone filter, k = 1.1)
+    photon_lookups         0         camera samples per pixel that ask the photon map; their
+                                     estimate stands for the pixel's other samples too.
+                                     0 = automatic: about 300k look-ups per image, at least
+                                     1 and at most ``samples`` per pixel
     seed                   0         random seed; same seed, same image
     threads                0         worker threads; 0 = all cores
     filter_width           1.5       Blackman-Harris pixel filter width [px]
@@ -45,29 +62,53 @@ from .accel import Accelerator
 from .camera import pixel_rays
 from .direct import direct_terms, irradiance_from_terms
 from .lights import LightSet
+from .photons import auto_max_radius, auto_photon_count, build_photon_map
 from .scene import Scene, SceneError
 
 TARGET_BATCH_SAMPLES = 1 << 16
 
 
+MODES = ("full", "photon-map")
+PHOTON_FILTERS = ("none", "cone")
+CONE_FILTER_K = 1.1
+MAX_PHOTONS = 50_000_000
+
+
 @dataclass
 class RenderSettings:
+    mode: str = "full"
     samples: int = 16
     light_samples: int = 4
-    bounces: int = 0
+    bounces: int = 64
     seed: int = 0
     threads: int = 0
     filter_width: float = 1.5
     max_specular_depth: int = 8
+    photons: int = 0
+    photon_k: int = 50
+    photon_radius: float = 0.0
+    photon_filter: str = "none"
+    photon_lookups: int = 0
 
     def validate(self) -> "RenderSettings":
-        checks = [("samples", self.samples >= 1), ("light_samples", self.light_samples >= 0),
-                  ("bounces", self.bounces >= 0), ("threads", self.threads >= 0),
+        checks = [("mode", self.mode in MODES),
+                  ("samples", self.samples >= 1), ("light_samples", self.light_samples >= 0),
+                  ("bounces", 0 <= self.bounces <= 255), ("threads", self.threads >= 0),
                   ("filter_width", 0 <= self.filter_width <= 10),
-                  ("max_specular_depth", self.max_specular_depth >= 0)]
+                  ("max_specular_depth", self.max_specular_depth >= 0),
+                  ("photons", 0 <= self.photons <= MAX_PHOTONS),
+                  ("photon_k", 1 <= self.photon_k <= 10_000),
+                  ("photon_radius", np.isfinite(self.photon_radius) and self.photon_radius >= 0),
+                  ("photon_filter", self.photon_filter in PHOTON_FILTERS),
+                  ("photon_lookups", self.photon_lookups >= 0)]
         for name, ok in checks:
             if not ok:
-                raise SceneError(f"Render settings: {name} = {getattr(self, name)} is out of range")
+                allowed = {"mode": f" (one of {', '.join(MODES)})",
+                           "photon_filter": f" (one of {', '.join(PHOTON_FILTERS)})",
+                           "photons": f" (0 = automatic, at most {MAX_PHOTONS:,})",
+                           "bounces": " (0-255)"}.get(name, "")
+                raise SceneError(f"Render settings: {name} = {getattr(self, name)!r} is out of "
+                                 f"range{allowed}")
         return self
 
     @property
@@ -122,12 +163,35 @@ def _add_to_pixels(pixels: np.ndarray, pixel_of: np.ndarray | None, values: np.n
 MAX_HISTOGRAM_MATERIALS = 64
 
 
+LOOKUP_BUDGET = 300_000      # photon-map look-ups per image when photon_lookups = 0
+
+
+def auto_lookups(pixels: int, samples: int) -> int:
+    """Camera samples per pixel that ask the photon map by default: about ``LOOKUP_BUDGET``
+    look-ups per image (a small preview gets every sample looked up, a 640 x 480 render one
+    per pixel), between 1 and ``samples``."""
+    return int(min(samples, max(1, -(-LOOKUP_BUDGET // max(int(pixels), 1)))))
+
+
+@dataclass
+class _PhotonLookup:
+    """What the camera stage needs to ask the photon map."""
+    photon_map: object
+    k: int
+    max_radius: float
+    min_bounces: int            # 1 in ``full`` mode: only light that bounced (indirect)
+    cone_filter: float | None
+    lookups: int                # camera samples per pixel that ask the map
+
+
 def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArrays,
                         accel: Accelerator, lights: LightSet, settings: RenderSettings,
-                        ray_log: list | None):
+                        ray_log: list | None, photon: _PhotonLookup | None = None):
     """Radiance for the pixels of one batch: (pixels, 3) mean over their samples."""
     stats = {"camera_rays": 0, "shadow_rays": 0, "specular_rays": 0,
-             "trace_seconds": 0.0, "seconds": 0.0}
+             "trace_seconds": 0.0, "seconds": 0.0, "queries": 0, "query_seconds": 0.0,
+             "estimate_seconds": 0.0}
+    direct_light = settings.mode == "full"
     started = time.perf_counter()
     rng = sampling.rng_for(settings.seed, sampling.STREAM_CAMERA, batch)
     p0, p1 = pixel_range
@@ -139,6 +203,8 @@ def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArr
     throughput = np.ones((count, 3), np.float32) if arrays.has_specular else None
     ray_of = np.arange(count)
     world = scene.world.radiance
+    if photon is not None and photon.lookups < spp:
+        first_lookup = rng.integers(0, spp, p1 - p0)
     for depth in range(settings.max_specular_depth + 1):
         if len(ray_of) == 0:
             break
@@ -195,7 +261,25 @@ def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArr
             idx = np.nonzero(diffuse)[0]
         else:
             idx = None
-        if idx is not None:
+        if idx is not None and photon is not None:
+            # Photon-map estimate at the diffuse hits of the samples that ask for it.
+            ask = idx if isinstance(idx, np.ndarray) else np.arange(len(mat))
+            if photon.lookups < spp:
+                # The pixel's strata come in a fixed order: start at a random one per pixel,
+                # so the asking samples are a uniform pick over the pixel's filter footprint.
+                s = rays[ask]
+                ask = ask[(s - first_lookup[s // spp]) % spp < photon.lookups]
+            if len(ask):
+                t0 = time.perf_counter()
+                e = photon.photon_map.irradiance(
+                    x[ask], ng[ask], k=photon.k, max_radius=photon.max_radius,
+                    min_bounces=photon.min_bounces, cone_filter=photon.cone_filter, stats=stats)
+                stats["estimate_seconds"] += time.perf_counter() - t0
+                e *= arrays.diffuse_over_pi[mat[ask]] * (spp / min(photon.lookups, spp))
+                if depth > 0:
+                    e *= thr[ask]
+                _add_to_pixels(pixel_sums, rays[ask] // spp, e)
+        if idx is not None and direct_light:
             shadow_stats = {}
             terms = direct_terms(x[idx], ns[idx], lights, accel, rng, settings.light_samples,
                                  stats=shadow_stats, offset_normals=ng[idx], ray_log=ray_log)
@@ -265,11 +349,6 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
     scene.validate()
     report["warnings"].extend(scene.warnings)
     stage("validate", time.perf_counter() - t0, triangles=int(len(scene.triangles)))
-    if settings.bounces > 0:
-        report["warnings"].append(
-            f"Render settings: bounces = {settings.bounces}, but indirect light is not "
-            "implemented yet; rendering direct light only")
-
     # 2. accel_build (single-threaded queries: parallelism is across batches)
     tell(0.0, "Building the BVH")
     accel = Accelerator(scene.triangles, threads=1)
@@ -283,29 +362,89 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
         report["warnings"].append("Scene: no lights, no emissive materials and a black world; "
                                   "the image is black")
 
-    # 4. camera: batches of whole pixels over a thread pool
     width, height = scene.camera.window_size
     pixel_count = width * height
+    arrays = _SceneArrays(scene)
+    pool = ThreadPoolExecutor(settings.worker_count)
+
+    # 4. photons: the plan says why the stage runs or not
+    photon, pmap = None, None
+    emits = (not lights.empty) or arrays.has_emission
+    if settings.mode == "full" and settings.bounces == 0:
+        reason = "skipped: bounces = 0 (direct light only)"
+    elif not emits:
+        reason = "skipped: nothing emits light"
+    elif not arrays.is_diffuse.any():
+        reason = "skipped: no diffuse surface to store photons on"
+    else:
+        reason = ("indirect light for the full mode" if settings.mode == "full"
+                  else "all light, seen directly (photon-map mode)")
+    report["plan"] = {"mode": settings.mode, "direct_light": settings.mode == "full",
+                      "photons": reason}
+    if not reason.startswith("skipped"):
+        count = settings.photons or auto_photon_count(pixel_count)
+        tell(0.0, f"Photons: tracing {count:,}")
+        t0 = time.perf_counter()
+        try:
+            pmap = build_photon_map(
+                scene, accel, count, seed=settings.seed, max_bounces=settings.bounces,
+                keep="indirect" if settings.mode == "full" else "all", pool=pool,
+                progress=lambda f: tell(0.0, f"Photons: {f:.0%} of {count:,} traced"),
+                cancelled=cancelled)
+        except BaseException:
+            pool.shutdown(wait=True, cancel_futures=True)
+            accel.close()
+            raise
+        photon_seconds = time.perf_counter() - t0
+        radius = settings.photon_radius or auto_max_radius(scene, len(pmap), settings.photon_k)
+        lookups = settings.photon_lookups or auto_lookups(pixel_count, settings.samples)
+        photon = _PhotonLookup(pmap, settings.photon_k, radius,
+                               1 if settings.mode == "full" else 0,
+                               CONE_FILTER_K if settings.photon_filter == "cone" else None,
+                               lookups)
+        s = pmap.stats
+        stage("photons", photon_seconds, requested=s["requested"], emitted=s["emitted"],
+              stored=s["stored"], stored_all=s["stored_all"], kept=s["kept"],
+              photons_per_light=s["photons_per_light"], photon_rays=s.get("rays", 0),
+              flux_emitted=s["flux_emitted"], flux_absorbed=s.get("flux_absorbed", [0, 0, 0]),
+              flux_escaped=s.get("flux_escaped", [0, 0, 0]),
+              flux_capped=s.get("flux_capped", [0, 0, 0]), capped_paths=s.get("capped_paths", 0),
+              flux_stored_direct=s["flux_stored_direct"],
+              flux_stored_indirect=s["flux_stored_indirect"],
+              map_bytes=s["bytes"], bytes_per_photon=s["bytes_per_photon"],
+              kd_tree=s.get("library"), emit_seconds=round(s["emit_seconds"], 6),
+              trace_seconds=round(s["trace_seconds"], 6),
+              build_seconds=round(s.get("build_seconds", 0.0), 6),
+              k=settings.photon_k, max_radius_m=radius, radius_automatic=not settings.photon_radius,
+              filter=settings.photon_filter, max_bounces=settings.bounces,
+              lookups_per_pixel=lookups)
+        if s.get("capped_paths", 0):
+            report["warnings"].append(
+                f"Photons: {s['capped_paths']:,} photon paths reached the bounce limit "
+                f"({settings.bounces}); their flux {np.round(s['flux_capped'], 6).tolist()} W was "
+                "dropped (a very bright enclosure?)")
+
+    # 5. camera: batches of whole pixels over a thread pool
     batch_pixels = max(1, TARGET_BATCH_SAMPLES // settings.samples)
     ranges = [(p, min(p + batch_pixels, pixel_count)) for p in range(0, pixel_count, batch_pixels)]
-    arrays = _SceneArrays(scene)
     image = np.zeros((pixel_count, 3), np.float32)
     totals = {"camera_rays": 0, "shadow_rays": 0, "specular_rays": 0, "trace_seconds": 0.0,
-              "batch_seconds": 0.0}
+              "batch_seconds": 0.0, "queries": 0, "query_seconds": 0.0, "estimate_seconds": 0.0}
     t0 = time.perf_counter()
-    was_cancelled = False
+    was_cancelled = bool(pmap is not None and pmap.stats["cancelled"])
     done = 0
-    tell(0.0, f"Direct light: 0/{len(ranges)} batches")
-    with ThreadPoolExecutor(settings.worker_count) as pool:
+    label = "Rendering" if settings.mode == "full" else "Photon map"
+    tell(0.0, f"{label}: 0/{len(ranges)} batches")
+    with pool:
         pending = {}
-        queue = list(enumerate(ranges))
+        queue = [] if was_cancelled else list(enumerate(ranges))
         queue.reverse()
 
         def submit():
             while queue and len(pending) < 2 * settings.worker_count:
                 batch, rng_ = queue.pop()
                 fut = pool.submit(_shade_camera_batch, batch, rng_, scene, arrays, accel, lights,
-                                  settings, ray_log)
+                                  settings, ray_log, photon)
                 pending[fut] = rng_
 
         submit()
@@ -315,11 +454,12 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
                 a, b = pending.pop(fut)
                 pixels, batch_stats = fut.result()
                 image[a:b] = pixels
-                for key in ("camera_rays", "shadow_rays", "specular_rays", "trace_seconds"):
+                for key in ("camera_rays", "shadow_rays", "specular_rays", "trace_seconds",
+                                "queries", "query_seconds", "estimate_seconds"):
                     totals[key] += batch_stats[key]
                 totals["batch_seconds"] += batch_stats["seconds"]
                 done += 1
-            tell(done / len(ranges), f"Direct light: {done}/{len(ranges)} batches")
+            tell(done / len(ranges), f"{label}: {done}/{len(ranges)} batches")
             if cancelled is not None and cancelled():
                 was_cancelled = True
                 queue.clear()
@@ -330,6 +470,9 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
           camera_rays=totals["camera_rays"], shadow_rays=totals["shadow_rays"],
           specular_rays=totals["specular_rays"],
           trace_thread_seconds=round(totals["trace_seconds"], 6),
+          photon_queries=totals["queries"],
+          photon_query_thread_seconds=round(totals["query_seconds"], 6),
+          photon_estimate_thread_seconds=round(totals["estimate_seconds"], 6),
           thread_seconds=round(totals["batch_seconds"], 6),
           rays_per_second=rays / camera_seconds if camera_seconds > 0 else 0.0)
 

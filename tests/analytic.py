@@ -64,3 +64,28 @@ def plane_scene(lights, size=10.0, rho=1.0, resolution=(32, 32), height=4.0, fov
                          resolution=resolution)
     return Scene(triangles=tris, material_ids=np.zeros(len(tris), np.int32),
                  materials=[Material("white", diffuse=rho)], camera=cam, lights=list(lights))
+
+
+def icosphere(radius=1.0, subdivisions=3, center=(0.0, 0.0, 0.0)):
+    """Triangles (20 * 4^s, 3, 3) float32 of a geodesic sphere: an icosahedron whose faces
+    are split in four ``subdivisions`` times, vertices pushed onto the sphere."""
+    t = (1.0 + 5 ** 0.5) / 2
+    v = np.array([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t],
+                  [0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]], float)
+    f = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9],
+                  [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2],
+                  [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10],
+                  [8, 6, 7], [9, 8, 1]])
+    tris = v[f] / np.linalg.norm(v[f], axis=2, keepdims=True)
+    for _ in range(subdivisions):
+        a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
+        ab, bc, ca = [(p + q) / np.linalg.norm(p + q, axis=1, keepdims=True)
+                      for p, q in ((a, b), (b, c), (c, a))]
+        tris = np.concatenate([np.stack(s, 1) for s in
+                               ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))])
+    return (tris * radius + np.asarray(center, float)).astype(np.float32)
+
+
+def triangle_area_sum(tris):
+    tris = np.asarray(tris, float)
+    return 0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1).sum()

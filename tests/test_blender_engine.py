@@ -155,7 +155,9 @@ def test_unregister_leaves_nothing_registered():
 def test_properties_defaults_limits_and_descriptions(registered):
     scene = reset()
     s = scene.lanterna
-    assert (s.samples, s.light_samples, s.bounces, s.seed, s.threads) == (16, 4, 0, 0, 0)
+    assert (s.samples, s.light_samples, s.bounces, s.seed, s.threads) == (16, 4, 64, 0, 0)
+    assert (s.mode, s.photons, s.photon_k, s.photon_radius, s.photon_filter, s.photon_lookups) \
+        == ('FULL', 0, 50, 0.0, 'NONE', 0)
     mat = bpy.data.materials.new("M")
     assert mat.lanterna.derive_from_nodes is True
     assert tuple(mat.lanterna.diffuse) == pytest.approx((0.8, 0.8, 0.8))
@@ -168,7 +170,9 @@ def test_properties_defaults_limits_and_descriptions(registered):
     s.samples = 0
     assert s.samples == 1
     s.bounces = 1000
-    assert s.bounces == 64
+    assert s.bounces == 255
+    s.photon_k = 0
+    assert s.photon_k == 1
     mat.lanterna.diffuse = (2.0, -1.0, 0.5)
     assert tuple(mat.lanterna.diffuse) == pytest.approx((1.0, 0.0, 0.5))
     mat.lanterna.exitance = (500.0, -1.0, 0.0)
@@ -356,11 +360,14 @@ def test_scene_error_from_export_is_reported(registered, capfd, monkeypatch):
     assert "Traceback" not in out.err + out.out
 
 
-def test_progress_and_cancel_are_wired(registered, tmp_path, monkeypatch):
+@pytest.mark.parametrize("bounces", [0, 64])
+def test_progress_and_cancel_are_wired(registered, tmp_path, monkeypatch, bounces):
     """The engine passes update_progress and test_break to the pipeline; a cancelled render
     keeps the pixels it has and is no error. (RNA methods such as test_break cannot be
-    monkeypatched on the class, so the pipeline is wrapped instead.)"""
-    upper_wall_scene()
+    monkeypatched on the class, so the pipeline is wrapped instead.) With bounces = 0 the
+    cancel lands in the camera stage after the first batch (its pixels are kept); with
+    bounces the photon stage stops after its first chunk and no camera batch runs."""
+    upper_wall_scene().lanterna.bounces = bounces
     real_render = pipeline.render
     seen = {}
 
@@ -374,4 +381,10 @@ def test_progress_and_cancel_are_wired(registered, tmp_path, monkeypatch):
     assert seen["test_break"] is False
     assert render_engine.LAST_RENDER["error"] is None
     assert render_engine.LAST_RENDER["cancelled"] is True
-    assert image.shape == (24, 32, 3) and image[:9].mean() > 1e-3
+    assert image.shape == (24, 32, 3)
+    if bounces == 0:
+        assert image[:9].mean() > 1e-3
+    else:
+        report = render_engine.LAST_RENDER["report"]
+        assert report["stages"]["photons"]["emitted"] < report["stages"]["photons"]["requested"]
+        assert report["stages"]["camera"]["batches_done"] == 0 and image.max() == 0.0

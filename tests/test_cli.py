@@ -48,6 +48,9 @@ def test_bad_arguments_give_one_line_and_status_2(tmp_path, capfd):
         ("render", "-o", out, "--samples", "many"): "expected an integer",
         ("render", "-o", out, "--light-samples", "0"): "--light-samples",
         ("render", "-o", out, "--bounces", "-2"): "--bounces",
+        ("render", "-o", out, "--mode", "path"): "--mode",
+        ("render", "-o", out, "--photon-radius", "nan"): "--photon-radius",
+        ("render", "-o", out, "--photon-k", "0"): "--photon-k",
         ("render", "-o", out, "--seed", "-3"): "--seed",
         ("render",): "required",
         ("render", "-o", out, "--scene", "scene9"): "invalid choice",
@@ -152,6 +155,27 @@ def test_tiny_render_writes_exr_png_and_report(tmp_path, capfd):
     lscene = export.export_scene(bpy.context.evaluated_depsgraph_get())
     expected = pipeline.render(lscene, export.export_settings(scene)).image
     np.testing.assert_allclose(image, expected, rtol=1e-6, atol=0)
+
+
+def test_photon_flags_reach_the_pipeline(tmp_path, capfd):
+    exr, report = tmp_path / "p.exr", tmp_path / "p.json"
+    code = cli.main(["render", "--resolution", "32x24", "--samples", "2", "--mode", "photon-map",
+                     "--photons", "20000", "--photon-k", "30", "--photon-radius", "0.5",
+                     "--photon-filter", "cone", "--photon-lookups", "2", "--bounces", "5",
+                     "-o", str(exr), "--report", str(report), "--quiet"])
+    assert code == 0, capfd.readouterr().err
+    data = json.loads(report.read_text())
+    s = data["settings"]
+    assert (s["mode"], s["photons"], s["photon_k"], s["photon_radius"], s["photon_filter"],
+            s["photon_lookups"], s["bounces"]) == ("photon-map", 20000, 30, 0.5, "cone", 2, 5)
+    photons = data["pipeline"]["stages"]["photons"]
+    assert photons["emitted"] == 20000 and photons["kept"] == "all"
+    assert photons["max_radius_m"] == 0.5 and photons["max_bounces"] == 5
+    # Scene 1 is closed: every photon's flux is absorbed or dropped at the bounce limit.
+    ended = np.add(photons["flux_absorbed"], photons["flux_capped"])
+    np.testing.assert_allclose(ended, photons["flux_emitted"], rtol=0.05)
+    assert data["pipeline"]["stages"]["camera"]["photon_queries"] == 32 * 24 * 2
+    assert imageio.read_exr_rgb(exr).max() > 0.01
 
 
 def test_render_a_saved_blend_with_border(tmp_path, capfd):

@@ -50,7 +50,7 @@ def test_point_light_render_matches_eq_7_1():
     light = PointLight("Lamp", [0.0, 0.0, 1.5], [200.0, 200.0, 200.0])
     res = 24
     scene = plane_scene([light], resolution=(res, res), height=4.0, fov=90.0)
-    result = render(scene, RenderSettings(samples=64, filter_width=0.0, seed=3))
+    result = render(scene, RenderSettings(samples=64, filter_width=0.0, seed=3, bounces=0))
     img = result.image[..., 0]
     # Exact pixel averages: supersample each pixel footprint on the plane z = 0.
     sub = 32
@@ -168,7 +168,7 @@ def _occluded_room(scale):
 
 @pytest.mark.parametrize("scale", [1e-3, 1e3])
 def test_scaled_scene_renders_the_same(scale):
-    settings = RenderSettings(samples=16, light_samples=4, seed=11)
+    settings = RenderSettings(samples=16, light_samples=4, seed=11, bounces=0)
     reference = render(_occluded_room(1.0), settings).image
     scaled = render(_occluded_room(scale), settings).image
     assert np.all(np.isfinite(scaled))

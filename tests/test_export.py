@@ -591,6 +591,12 @@ def test_export_settings():
     assert st.threads == os.cpu_count()
     fake.lanterna.threads = 1
     assert export_settings(fake).threads == 1
+    # Enum identifiers become the core's names.
+    fake.lanterna.mode, fake.lanterna.photon_filter = "PHOTON_MAP", "CONE"
+    fake.lanterna.photons, fake.lanterna.photon_k, fake.lanterna.photon_radius = 5000, 20, 0.25
+    st = export_settings(fake)
+    assert (st.mode, st.photon_filter, st.photons, st.photon_k, st.photon_radius) == \
+        ("photon-map", "cone", 5000, 20, 0.25)
 
 
 def test_mirrored_object_keeps_outward_normals():

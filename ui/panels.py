@@ -3,7 +3,8 @@
 Every Lanterna panel shares :class:`LanternaPanel`: ``COMPAT_ENGINES = {'LANTERNA'}`` and a
 poll on ``context.engine``, so they show only while Lanterna is the scene's render engine.
 
-* Render:   ``LANTERNA_RENDER_PT_sampling`` (samples, light samples, bounces, seed, threads)
+* Render:   ``LANTERNA_RENDER_PT_sampling`` (mode, samples, light samples, bounces, seed,
+            threads), ``LANTERNA_RENDER_PT_photons`` (photon count, k, radius, filter, lookups)
             and ``LANTERNA_RENDER_PT_last_render`` (stage timings of the last render).
 * Material: ``LANTERNA_MATERIAL_PT_surface`` (the node tree's Surface input, to edit the
             shader as in Cycles) and ``LANTERNA_MATERIAL_PT_radiometry`` (the seed's rho_d,
@@ -51,13 +52,32 @@ class LANTERNA_RENDER_PT_sampling(LanternaPanel, bpy.types.Panel):
     def draw(self, context):
         layout = _split(self.layout)
         settings = context.scene.lanterna
+        layout.prop(settings, "mode")
         col = layout.column(align=True)
         col.prop(settings, "samples")
-        col.prop(settings, "light_samples")
+        sub = col.column(align=True)
+        sub.active = settings.mode == 'FULL'
+        sub.prop(settings, "light_samples")
         layout.prop(settings, "bounces")
         col = layout.column(align=True)
         col.prop(settings, "seed")
         col.prop(settings, "threads")
+
+
+class LANTERNA_RENDER_PT_photons(LanternaPanel, bpy.types.Panel):
+    bl_label = "Photons"
+    bl_context = "render"
+
+    def draw(self, context):
+        layout = _split(self.layout)
+        settings = context.scene.lanterna
+        layout.active = settings.mode == 'PHOTON_MAP' or settings.bounces > 0
+        layout.prop(settings, "photons", text="Photons (0 = Auto)")
+        col = layout.column(align=True)
+        col.prop(settings, "photon_k")
+        col.prop(settings, "photon_radius", text="Max Radius (0 = Auto)")
+        layout.prop(settings, "photon_filter")
+        layout.prop(settings, "photon_lookups", text="Lookups per Pixel (0 = Auto)")
 
 
 class LANTERNA_RENDER_PT_last_render(LanternaPanel, bpy.types.Panel):
@@ -227,6 +247,7 @@ class LANTERNA_WORLD_PT_surface(LanternaPanel, bpy.types.Panel):
 
 classes = (
     LANTERNA_RENDER_PT_sampling,
+    LANTERNA_RENDER_PT_photons,
     LANTERNA_RENDER_PT_last_render,
     LANTERNA_MATERIAL_PT_surface,
     LANTERNA_MATERIAL_PT_radiometry,

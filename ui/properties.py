@@ -13,15 +13,25 @@ with the exporter: do not rename them.
 """
 
 import bpy
-from bpy.props import (BoolProperty, FloatProperty, FloatVectorProperty, IntProperty,
-                       PointerProperty)
+from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty,
+                       IntProperty, PointerProperty)
 
 INT_MAX = 2 ** 31 - 1
 
 
 class LanternaSceneSettings(bpy.types.PropertyGroup):
-    """Render settings of one scene (Properties editor > Render > Sampling)."""
+    """Render settings of one scene (Properties editor > Render > Sampling, Photons)."""
 
+    mode: EnumProperty(
+        name="Mode",
+        description="How light is computed",
+        items=(
+            ('FULL', "Full", "Exact direct light plus indirect light from the photon map"),
+            ('PHOTON_MAP', "Photon Map",
+             "All light from the photon map, seen directly (fast, noisy; seed section 9.5)"),
+        ),
+        default='FULL',
+    )
     samples: IntProperty(
         name="Samples",
         description="Camera samples per pixel",
@@ -33,9 +43,43 @@ class LanternaSceneSettings(bpy.types.PropertyGroup):
         default=4, min=1, max=65536, soft_max=256, subtype='NONE',
     )
     bounces: IntProperty(
-        name="Bounces",
-        description="Indirect bounces (0 = direct light only)",
-        default=0, min=0, max=64, subtype='NONE',
+        name="Max Bounces",
+        description=("Most bounces of light between surfaces (0 = direct light only); photon "
+                     "paths end after this many"),
+        default=64, min=0, max=255, soft_max=64, subtype='NONE',
+    )
+    photons: IntProperty(
+        name="Photons",
+        description="Photons emitted from the lights (0 = automatic: two per pixel, 200k-2M)",
+        default=0, min=0, max=50_000_000, soft_max=10_000_000, subtype='NONE',
+    )
+    photon_k: IntProperty(
+        name="Photons per Estimate",
+        description="Nearest photons in each radiance estimate (Eq. 9.11)",
+        default=50, min=1, max=10_000, soft_max=500, subtype='NONE',
+    )
+    photon_radius: FloatProperty(
+        name="Max Radius",
+        description=("Largest radius of a photon estimate (0 = automatic, from the scene's "
+                     "area and the photon count)"),
+        default=0.0, min=0.0, max=1.0e6, soft_max=10.0, precision=4, subtype='DISTANCE',
+    )
+    photon_filter: EnumProperty(
+        name="Filter",
+        description="Weighting of the photons in an estimate",
+        items=(
+            ('NONE', "None", "Every photon in the disc counts fully"),
+            ('CONE', "Cone", "Nearer photons count more (Jensen's cone filter, k = 1.1): "
+                             "sharper edges, a little more noise"),
+        ),
+        default='NONE',
+    )
+    photon_lookups: IntProperty(
+        name="Lookups per Pixel",
+        description=("Camera samples per pixel that ask the photon map; their estimate stands "
+                     "for the pixel's other samples (0 = automatic: about 300k look-ups per "
+                     "image)"),
+        default=0, min=0, max=65536, soft_max=64, subtype='NONE',
     )
     seed: IntProperty(
         name="Seed",

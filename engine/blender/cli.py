@@ -5,7 +5,8 @@ Usage
 -----
 ``lanterna render [SCENE.blend] -o OUT.exr [--png OUT.png] [--report REPORT.json]``
     ``[--scene scene1|scene2] [--resolution WxH] [--samples N] [--light-samples N]``
-    ``[--bounces N] [--seed N] [--threads N]``
+    ``[--bounces N] [--seed N] [--threads N] [--mode full|photon-map] [--photons N]``
+    ``[--photon-k N] [--photon-radius R] [--photon-filter none|cone] [--photon-lookups N]``
 
     Renders the active scene of ``SCENE.blend`` with Lanterna (whatever engine the file names),
     or the seed's Scene 1 (``--scene`` picks another) when no file is given. Flags override
@@ -71,6 +72,19 @@ def _int_at_least(lowest: int, highest: int | None = None):
     return parse
 
 
+def _float_at_least(lowest: float):
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        if not (value >= lowest and value < float("inf")):
+            raise argparse.ArgumentTypeError(f"must be a finite number >= {lowest}, got {text}")
+        return value
+    parse.__name__ = "number"
+    return parse
+
+
 def _resolution(text: str) -> tuple[int, int]:
     parts = text.lower().replace("×", "x").split("x")
     try:
@@ -103,8 +117,22 @@ def build_parser() -> argparse.ArgumentParser:
                         help="camera samples per pixel")
     render.add_argument("--light-samples", type=_int_at_least(1, 65536), metavar="N",
                         help="samples per area/mesh/world light per camera hit")
-    render.add_argument("--bounces", type=_int_at_least(0, 64), metavar="N",
-                        help="indirect bounces (0 = direct light only)")
+    render.add_argument("--bounces", type=_int_at_least(0, 255), metavar="N",
+                        help="most bounces of light (0 = direct light only; default 64)")
+    render.add_argument("--mode", choices=("full", "photon-map"), default=None,
+                        help="full: exact direct + photon-map indirect (default); photon-map: "
+                             "the photon map seen directly")
+    render.add_argument("--photons", type=_int_at_least(0, 50_000_000), metavar="N",
+                        help="photons emitted (0 = automatic: 2 per pixel, 200k-2M)")
+    render.add_argument("--photon-k", type=_int_at_least(1, 10_000), metavar="N",
+                        help="photons per radiance estimate (default 50)")
+    render.add_argument("--photon-radius", type=_float_at_least(0.0), metavar="R",
+                        help="largest estimate radius in metres (0 = automatic)")
+    render.add_argument("--photon-filter", choices=("none", "cone"), default=None,
+                        help="photon weighting in an estimate (default none)")
+    render.add_argument("--photon-lookups", type=_int_at_least(0, 65536), metavar="N",
+                        help="camera samples per pixel that ask the photon map (0 = automatic: "
+                             "about 300k look-ups per image)")
     render.add_argument("--seed", type=_int_at_least(0, 2 ** 31 - 1), metavar="N",
                         help="random seed")
     render.add_argument("--threads", type=_int_at_least(0, 1024), metavar="N",
@@ -177,11 +205,15 @@ def _apply_overrides(scene, args) -> None:
         scene.render.resolution_x, scene.render.resolution_y = args.resolution
         scene.render.resolution_percentage = 100
     settings = scene.lanterna
-    for flag, prop in (("samples", "samples"), ("light_samples", "light_samples"),
-                       ("bounces", "bounces"), ("seed", "seed"), ("threads", "threads")):
+    for flag in ("samples", "light_samples", "bounces", "seed", "threads", "photons",
+                 "photon_k", "photon_radius", "photon_lookups"):
         value = getattr(args, flag)
         if value is not None:
-            setattr(settings, prop, value)
+            setattr(settings, flag, value)
+    for flag in ("mode", "photon_filter"):            # core names -> enum identifiers
+        value = getattr(args, flag)
+        if value is not None:
+            setattr(settings, flag, value.upper().replace("-", "_"))
 
 
 class _Progress:

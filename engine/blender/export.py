@@ -926,6 +926,10 @@ def export_settings(blender_scene) -> RenderSettings:
                 else value
         except (TypeError, ValueError):
             raise SceneError(f"Render setting '{f.name}' has an invalid value {value!r}")
+    # Enum identifiers ('PHOTON_MAP') -> core names ('photon-map').
+    for key in ("mode", "photon_filter"):
+        if key in values:
+            values[key] = str(values[key]).lower().replace("_", "-")
     threads = int(values.get("threads", 0))
     values["threads"] = threads if threads > 0 else (os.cpu_count() or 1)
     if "samples" in values:
