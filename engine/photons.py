@@ -125,11 +125,15 @@ def _light_fluxes(scene: Scene):
 
 def emit_photons(scene: Scene, count: int, rng: np.random.Generator) -> EmittedPhotons:
     """``count`` photons shared among the lights in proportion to their flux."""
-    lights = [entry for entry in _light_fluxes(scene) if np.any(entry[1] > 0)]
+    lights = [entry for entry in _light_fluxes(scene) if np.any(entry[1] > 0)
+              and getattr(entry[2][1], "photon_share", 1.0) > 0]
     if not lights or count <= 0:
         z = np.zeros((0, 3))
         return EmittedPhotons(z, z.copy(), z.copy())
-    lum = np.array([max(float(flux @ LUMINANCE), 1e-30) for _, flux, _ in lights])
+    # Photons per light: in proportion to its flux (luminance) times its photon share; each
+    # photon carries flux / (its light's count), so the share moves noise, not energy.
+    lum = np.array([max(float(flux @ LUMINANCE), 1e-30) * getattr(spec[1], "photon_share", 1.0)
+                    for _, flux, spec in lights])
     share = np.maximum(np.floor(count * lum / lum.sum()).astype(int), 1)
     origins, directions, powers, per_light = [], [], [], {}
     for (name, flux, spec), n in zip(lights, share):

@@ -418,6 +418,10 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
               k=settings.photon_k, max_radius_m=radius, radius_automatic=not settings.photon_radius,
               filter=settings.photon_filter, max_bounces=settings.bounces,
               lookups_per_pixel=lookups)
+        for light in scene.lights:
+            if getattr(light, "photon_share", 1.0) == 0:
+                report["warnings"].append(f"Light '{light.name}': photon share 0, so it sends "
+                                          "no photons and adds no indirect light")
         if s.get("capped_paths", 0):
             report["warnings"].append(
                 f"Photons: {s['capped_paths']:,} photon paths reached the bounce limit "

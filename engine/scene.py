@@ -86,6 +86,17 @@ class Material:
         return bool(np.any(self.exitance > 0))
 
 
+def _share(value, name: str) -> float:
+    """A light's photon share: a finite weight >= 0 (1 = photons in proportion to flux)."""
+    try:
+        share = float(value)
+    except (TypeError, ValueError):
+        raise SceneError(f"{name}: photon share {value!r} is not a number") from None
+    if not (np.isfinite(share) and share >= 0):
+        raise SceneError(f"{name}: photon share {value!r} must be a finite number >= 0")
+    return share
+
+
 @dataclass
 class PointLight:
     """Isotropic point light of radiant flux ``flux`` [W] (seed 3.3.1, Eq. 7.1)."""
@@ -93,10 +104,12 @@ class PointLight:
     name: str
     position: np.ndarray
     flux: np.ndarray
+    photon_share: float = 1.0
 
     def __post_init__(self):
         self.position = _vec3(self.position, self.name, "position")
         self.flux = _rgb(self.flux, self.name, "flux")
+        self.photon_share = _share(self.photon_share, self.name)
 
 
 @dataclass
@@ -113,8 +126,10 @@ class SpotLight:
     flux: np.ndarray
     half_angle: float
     blend: float = 0.0
+    photon_share: float = 1.0
 
     def __post_init__(self):
+        self.photon_share = _share(self.photon_share, self.name)
         self.position = _vec3(self.position, self.name, "position")
         self.direction = _unit(self.direction, self.name, "direction")
         self.flux = _rgb(self.flux, self.name, "flux")
@@ -135,8 +150,10 @@ class SunLight:
     direction: np.ndarray
     irradiance: np.ndarray
     angle: float = 0.0
+    photon_share: float = 1.0
 
     def __post_init__(self):
+        self.photon_share = _share(self.photon_share, self.name)
         self.direction = _unit(self.direction, self.name, "direction")
         self.irradiance = _rgb(self.irradiance, self.name, "irradiance")
         self.angle = float(np.clip(self.angle, 0.0, np.pi))
@@ -163,8 +180,10 @@ class AreaLight:
     size_y: float
     power: np.ndarray
     collimated: bool = False
+    photon_share: float = 1.0
 
     def __post_init__(self):
+        self.photon_share = _share(self.photon_share, self.name)
         self.matrix = np.asarray(self.matrix, dtype=np.float64).reshape(4, 4)
         if not np.all(np.isfinite(self.matrix)):
             raise SceneError(f"{self.name}: transform is not finite")

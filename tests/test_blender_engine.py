@@ -388,3 +388,12 @@ def test_progress_and_cancel_are_wired(registered, tmp_path, monkeypatch, bounce
         report = render_engine.LAST_RENDER["report"]
         assert report["stages"]["photons"]["emitted"] < report["stages"]["photons"]["requested"]
         assert report["stages"]["camera"]["batches_done"] == 0 and image.max() == 0.0
+
+
+def test_light_photon_share_is_exported(registered):
+    scene = upper_wall_scene()
+    light = scene.objects["Light"].data
+    assert light.lanterna.photon_share == 1.0
+    light.lanterna.photon_share = 2.5
+    lscene = export.export_scene(bpy.context.evaluated_depsgraph_get())
+    assert [(l.name, l.photon_share) for l in lscene.lights] == [("Light", 2.5)]

@@ -13,7 +13,7 @@ from lanterna.engine import sampling
 from lanterna.engine.accel import Accelerator
 from lanterna.engine.photons import build_photon_map, emit_photons, trace_photons
 from lanterna.engine.pipeline import RenderSettings, render
-from lanterna.engine.scene import AreaLight, Camera, Material, PointLight, Scene
+from lanterna.engine.scene import AreaLight, Camera, Material, PointLight, Scene, SceneError
 
 
 def _furnace(rho, exitance=2.0):
@@ -169,8 +169,10 @@ def test_point_light_in_a_diffuse_sphere(mode):
     np.testing.assert_allclose(img.mean(axis=0), img[:, 0].mean(), rtol=1e-5)   # grey stays grey
     stage = result.report["stages"]["photons"]
     assert stage["kept"] == ("indirect" if mode == "full" else "all")
-    # Closed sphere: nothing escapes; emitted = absorbed + capped within the RR noise.
+    # Closed sphere: nothing escapes; every photon's first hit is stored, so the flux stored
+    # at first hits is the emitted flux; emitted = absorbed + capped within the RR noise.
     assert stage["flux_escaped"] == [0.0, 0.0, 0.0]
+    assert stage["flux_stored_direct"][0] == pytest.approx(flux, rel=1e-5)
     ended = stage["flux_absorbed"][0] + stage["flux_capped"][0]
     assert ended == pytest.approx(flux, rel=0.01)
 
@@ -210,3 +212,38 @@ def test_bounces_zero_and_empty_cases():
     result = render(dark, RenderSettings(samples=1))
     assert result.report["plan"]["photons"] == "skipped: nothing emits light"
     assert result.image.max() == 0.0
+
+
+def test_photon_share_moves_photons_not_energy():
+    """Light.lanterna.photon_share: photons split in proportion to flux x share; each light's
+    photons still carry exactly its flux; share 0 sends none (and the render warns)."""
+    a = PointLight("A", [0.0, 0.0, 1.0], [100.0] * 3, photon_share=3.0)
+    b = PointLight("B", [1.0, 0.0, 1.0], [100.0] * 3)
+    scene = plane_scene([a, b])
+    emitted = emit_photons(scene, 40_000, sampling.rng_for(1, sampling.STREAM_PHOTON))
+    assert emitted.per_light == {"A": 30_000, "B": 10_000}
+    np.testing.assert_allclose(emitted.power.sum(axis=0), [200.0] * 3, rtol=1e-9)
+    np.testing.assert_allclose(emitted.power[:30_000].sum(axis=0), [100.0] * 3, rtol=1e-9)
+    b.photon_share = 0.0
+    assert emit_photons(scene, 1000, sampling.rng_for(1, 3)).per_light == {"A": 1000}
+    result = render(scene, RenderSettings(samples=1, photons=1000))
+    assert any("'B': photon share 0" in w for w in result.report["warnings"])
+    with pytest.raises(SceneError, match="photon share"):
+        PointLight("C", [0, 0, 1], [1.0] * 3, photon_share=float("nan"))
+
+
+def test_cone_filter_keeps_the_irradiance():
+    """Jensen's cone filter (k_c = 1.1) is normalised by 1 - 2/(3 k_c): on a plane under a
+    point light its mean estimate stays within 3 % of Eq. 7.1, as the plain disc's does."""
+    light = PointLight("Lamp", [0.0, 0.0, 1.0], [1000.0] * 3)
+    scene = plane_scene([light], size=8.0).validate()
+    accel = Accelerator(scene.triangles, threads=1)
+    pmap = build_photon_map(scene, accel, 400_000, seed=9)
+    rng = np.random.default_rng(10)
+    pts = np.column_stack([rng.uniform(-2, 2, 300), rng.uniform(-2, 2, 300), np.zeros(300)])
+    n = np.tile([0.0, 0.0, 1.0], (300, 1))
+    exact = point_irradiance(pts, n, light.position, light.flux)[:, 0]
+    cone = pmap.irradiance(pts, n, k=100, cone_filter=1.1)[:, 0]
+    assert (cone / exact).mean() == pytest.approx(1.0, abs=0.03)
+    unnormalised = cone * (1 - 2 / 3.3)
+    assert (unnormalised / exact).mean() < 0.5

@@ -790,6 +790,9 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
         if otype == "LIGHT":
             light = _convert_light(name, obj.data, matrix, warn)
             if light is not None:
+                settings = getattr(obj.data, "lanterna", None)
+                if settings is not None:
+                    light.photon_share = float(settings.photon_share)
                 lights.append(light)
         elif otype == "MESH":
             if parent is not None:
