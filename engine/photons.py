@@ -353,42 +353,6 @@ class PhotonMap:
         flux[~ok] = 0.0
         flux[ok] /= area[ok, None]
         return flux
-        t0 = time.perf_counter()
-        points32 = np.ascontiguousarray(points, np.float32)
-        dist, idx = self.query(points32, k, max_radius)
-        if stats is not None:
-            stats["queries"] = stats.get("queries", 0) + len(points)
-            stats["query_seconds"] = stats.get("query_seconds", 0.0) + time.perf_counter() - t0
-        full = np.isfinite(dist[:, -1])
-        radius = np.where(full, dist[:, -1], np.float32(min(max_radius, 3e38)))
-        found = idx < len(self)
-        safe = np.where(found, idx, 0)
-        n32 = np.ascontiguousarray(normals, np.float32)
-        offset = self.positions[safe]
-        offset -= points32[:, None, :]
-        height = np.abs(np.einsum("nkj,nj->nk", offset, n32))
-        dirs = self._directions[safe].astype(np.float32)                # (N, k, 6)
-        arriving = np.einsum("nkj,nj->nk", dirs[..., :3], n32) < 0
-        same_side = np.einsum("nkj,nj->nk", dirs[..., 3:], n32) > 0.5
-        keep = found & arriving & same_side & (height <= disc_thickness * radius[:, None])
-        if min_bounces:
-            keep &= self.bounces[safe] >= min_bounces
-        # The k-th photon only marks the radius: leave it out, as (k - 1) / (pi r_k^2) is the
-        # unbiased density of k-nearest-neighbour estimation (k / (pi r_k^2) is k / (k - 1)
-        # too bright: +2 % at k = 50, measured on a sphere lit from its centre).
-        keep[:, -1] &= ~full
-        weight = keep.astype(np.float32)
-        if cone_filter:
-            kc = float(cone_filter)
-            weight *= np.maximum(0.0, 1.0 - dist / (kc * radius[:, None]))
-            norm = 1.0 - 2.0 / (3.0 * kc)
-        else:
-            norm = 1.0
-        flux = np.einsum("nk,nkc->nc", weight, self.power[safe]).astype(np.float64)
-        area = norm * np.pi * radius.astype(np.float64) ** 2
-        ok = np.isfinite(area) & (area > 0)
-        e[ok] = flux[ok] / area[ok, None]
-        return e
 
 
 def trace_photons(scene: Scene, accel, emitted: EmittedPhotons, rng: np.random.Generator,

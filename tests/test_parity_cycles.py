@@ -130,6 +130,16 @@ def compare_regions(lan, ref, ref_se, lan_se, shape, rel_tol=REL_TOL, abs_tol=AB
     return failures, "\n".join(rows)
 
 
+def pooled_relative_se(lan_se, ref_mean, ref_se):
+    """Relative SEs of Lanterna's and the reference's block means, pooled (RMS) over the
+    bright blocks so that one estimate has many degrees of freedom, and their combination."""
+    peak = ref_mean.reshape(-1, 3).max(axis=0)
+    bright = ref_mean >= BRIGHT_FRACTION * np.maximum(peak, 1e-30)
+    pooled_lan = math.sqrt(np.mean((lan_se[bright] / ref_mean[bright]) ** 2))
+    pooled_ref = math.sqrt(np.mean((ref_se[bright] / ref_mean[bright]) ** 2))
+    return pooled_lan, pooled_ref, math.hypot(pooled_lan, pooled_ref)
+
+
 def render_lanterna(name):
     from lanterna.engine.blender.export import export_scene
     from lanterna.engine.pipeline import RenderSettings, render
@@ -162,12 +172,7 @@ def test_direct_light_matches_cycles(name):
     lan_se = np.abs(blocks[0] - blocks[1]) / 2.0          # SE of the mean of two renders
     ref_mean, ref_se = ref["region_mean"], ref["region_se"]
 
-    # noise: pooled over the bright blocks so that one estimate has many degrees of freedom
-    peak = ref_mean.reshape(-1, 3).max(axis=0)
-    bright = ref_mean >= BRIGHT_FRACTION * np.maximum(peak, 1e-30)
-    pooled_lan = math.sqrt(np.mean((lan_se[bright] / ref_mean[bright]) ** 2))
-    pooled_ref = math.sqrt(np.mean((ref_se[bright] / ref_mean[bright]) ** 2))
-    noise = math.hypot(pooled_lan, pooled_ref)
+    pooled_lan, pooled_ref, noise = pooled_relative_se(lan_se, ref_mean, ref_se)
 
     failures, table = compare_regions(lan, ref_mean, ref_se, lan_se, (h, w))
     total = images[0].reshape(-1, 3).sum(0) / 2 + images[1].reshape(-1, 3).sum(0) / 2

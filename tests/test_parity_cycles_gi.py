@@ -26,7 +26,6 @@ worst bright block's mean deviation -2.99 % (Scene 1, a floor corner of the unli
 """
 from __future__ import annotations
 
-import math
 import sys
 from pathlib import Path
 
@@ -38,7 +37,8 @@ bpy = pytest.importorskip("bpy")
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 import parity_scenes  # noqa: E402
-from test_parity_cycles import BRIGHT_FRACTION, block_means, compare_regions, load_reference  # noqa: E402
+from test_parity_cycles import (BRIGHT_FRACTION, block_means, compare_regions,  # noqa: E402
+                                load_reference, pooled_relative_se)
 
 REF_DIR = HERE / "data" / "cycles_gi"
 REL_TOL = 0.05
@@ -90,11 +90,7 @@ def test_full_mode_matches_cycles_with_all_bounces(name):
     lan = np.mean(blocks, axis=0)
     lan_se = np.abs(blocks[0] - blocks[1]) / 2.0
     ref_mean, ref_se = ref["region_mean"], ref["region_se"]
-    peak = ref_mean.reshape(-1, 3).max(axis=0)
-    bright = ref_mean >= BRIGHT_FRACTION * np.maximum(peak, 1e-30)
-    pooled_lan = math.sqrt(np.mean((lan_se[bright] / ref_mean[bright]) ** 2))
-    pooled_ref = math.sqrt(np.mean((ref_se[bright] / ref_mean[bright]) ** 2))
-    noise = math.hypot(pooled_lan, pooled_ref)
+    pooled_lan, pooled_ref, noise = pooled_relative_se(lan_se, ref_mean, ref_se)
 
     failures, table = compare_regions(lan, ref_mean, ref_se, lan_se, (h, w), REL_TOL, ABS_TOL)
     ratio = np.mean(images, axis=0).reshape(-1, 3).sum(0) / ref["image"].reshape(-1, 3).sum(0)
