@@ -53,7 +53,7 @@ import os
 import resource
 import time
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
@@ -62,13 +62,24 @@ from .accel import Accelerator
 from .camera import pixel_rays
 from .direct import direct_terms, irradiance_from_terms
 from .lights import LightSet
+from .gather import RadianceEstimates, final_gather
 from .photons import auto_max_radius, auto_photon_count, build_photon_map
+from .plan import make_plan
 from .scene import Scene, SceneError
 
 TARGET_BATCH_SAMPLES = 1 << 16
 
 
 MODES = ("full", "photon-map")
+# Quality presets (issue 4): photons, gather M x N, cache error a, samples. Measured time and
+# error on the seed's scenes are in the README.
+PRESETS = {
+    "preview": dict(samples=4, light_samples=2, photons=200_000, gather_m=6, gather_n=24,
+                    cache_error=0.3, indirect="cache"),
+    "final": dict(samples=16, light_samples=8, photons=1_000_000, gather_m=12, gather_n=48,
+                  cache_error=0.15, indirect="cache"),
+}
+INDIRECT_METHODS = ("cache", "gather", "photon-map")
 PHOTON_FILTERS = ("none", "cone")
 CONE_FILTER_K = 1.1
 MAX_PHOTONS = 50_000_000
@@ -89,6 +100,21 @@ class RenderSettings:
     photon_radius: float = 0.0
     photon_filter: str = "none"
     photon_lookups: int = 0
+    indirect: str = "gather"
+    gather_m: int = 8
+    gather_n: int = 32
+    cache_error: float = 0.2
+    shadow_photons: bool = True
+    force: str = ""
+    preset: str = "custom"
+
+    def resolved(self) -> "RenderSettings":
+        """A copy with the preset's values in place of the individual settings (``custom``:
+        the settings as they are)."""
+        if self.preset not in PRESETS and self.preset != "custom":
+            raise SceneError(f"Render settings: preset = {self.preset!r} is not one of "
+                             f"{', '.join(('custom',) + tuple(PRESETS))}")
+        return replace(self, **PRESETS.get(self.preset, {}))
 
     def validate(self) -> "RenderSettings":
         checks = [("mode", self.mode in MODES),
@@ -100,10 +126,14 @@ class RenderSettings:
                   ("photon_k", 1 <= self.photon_k <= 10_000),
                   ("photon_radius", np.isfinite(self.photon_radius) and self.photon_radius >= 0),
                   ("photon_filter", self.photon_filter in PHOTON_FILTERS),
-                  ("photon_lookups", self.photon_lookups >= 0)]
+                  ("photon_lookups", self.photon_lookups >= 0),
+                  ("indirect", self.indirect in INDIRECT_METHODS),
+                  ("gather_m", 1 <= self.gather_m <= 256), ("gather_n", 1 <= self.gather_n <= 1024),
+                  ("cache_error", np.isfinite(self.cache_error) and 0.01 <= self.cache_error <= 10)]
         for name, ok in checks:
             if not ok:
                 allowed = {"mode": f" (one of {', '.join(MODES)})",
+                           "indirect": f" (one of {', '.join(INDIRECT_METHODS)})",
                            "photon_filter": f" (one of {', '.join(PHOTON_FILTERS)})",
                            "photons": f" (0 = automatic, at most {MAX_PHOTONS:,})",
                            "bounces": " (0-255)"}.get(name, "")
@@ -173,20 +203,36 @@ def auto_lookups(pixels: int, samples: int) -> int:
     return int(min(samples, max(1, -(-LOOKUP_BUDGET // max(int(pixels), 1)))))
 
 
-@dataclass
-class _PhotonLookup:
-    """What the camera stage needs to ask the photon map."""
-    photon_map: object
-    k: int
-    max_radius: float
-    min_bounces: int            # 1 in ``full`` mode: only light that bounced (indirect)
-    cone_filter: float | None
-    lookups: int                # camera samples per pixel that ask the map
+class _PhotonEstimate:
+    """Indirect (``full``) or all (``photon-map``) light from the photon map's estimate at the
+    hit itself (Eq. 9.11; seed 9.5)."""
+
+    def __init__(self, photon_map, k, max_radius, min_bounces, cone_filter, lookups):
+        self.photon_map, self.k, self.max_radius = photon_map, k, max_radius
+        self.min_bounces, self.cone_filter, self.lookups = min_bounces, cone_filter, lookups
+
+    def irradiance(self, x, ns, ng, rng, stats):
+        return self.photon_map.irradiance(x, ng, k=self.k, max_radius=self.max_radius,
+                                          min_bounces=self.min_bounces,
+                                          cone_filter=self.cone_filter, stats=stats)
+
+
+class _FinalGather:
+    """Indirect light by the stratified final gather at every asking sample (no cache)."""
+
+    def __init__(self, estimates, accel, arrays, m, n, lookups):
+        self.estimates, self.accel, self.arrays = estimates, accel, arrays
+        self.m, self.n, self.lookups = m, n, lookups
+
+    def irradiance(self, x, ns, ng, rng, stats):
+        e, _radiance, _dist = final_gather(x, ns, ng, self.estimates, self.accel, self.arrays,
+                                           rng, self.m, self.n, stats=stats)
+        return e
 
 
 def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArrays,
                         accel: Accelerator, lights: LightSet, settings: RenderSettings,
-                        ray_log: list | None, photon: _PhotonLookup | None = None):
+                        ray_log: list | None, photon=None):
     """Radiance for the pixels of one batch: (pixels, 3) mean over their samples."""
     stats = {"camera_rays": 0, "shadow_rays": 0, "specular_rays": 0,
              "trace_seconds": 0.0, "seconds": 0.0, "queries": 0, "query_seconds": 0.0,
@@ -271,9 +317,7 @@ def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArr
                 ask = ask[(s - first_lookup[s // spp]) % spp < photon.lookups]
             if len(ask):
                 t0 = time.perf_counter()
-                e = photon.photon_map.irradiance(
-                    x[ask], ng[ask], k=photon.k, max_radius=photon.max_radius,
-                    min_bounces=photon.min_bounces, cone_filter=photon.cone_filter, stats=stats)
+                e = photon.irradiance(x[ask], ns[ask], ng[ask], rng, stats)
                 stats["estimate_seconds"] += time.perf_counter() - t0
                 e *= arrays.diffuse_over_pi[mat[ask]] * (spp / min(photon.lookups, spp))
                 if depth > 0:
@@ -332,7 +376,7 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
     """Render ``scene``. ``progress(fraction, text)`` is called between batches and
     ``cancelled()`` polled there (return True to stop early). ``ray_log``, when a list,
     receives every traced batch of rays (benchmarks re-trace them with raw Embree)."""
-    settings = (settings or RenderSettings()).validate()
+    settings = (settings or RenderSettings()).resolved().validate()
     total_start = time.perf_counter()
     report = {"seed": settings.seed, "settings": asdict(settings), "stages": {}, "warnings": []}
     stages = report["stages"]
@@ -367,28 +411,21 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
     arrays = _SceneArrays(scene)
     pool = ThreadPoolExecutor(settings.worker_count)
 
-    # 4. photons: the plan says why the stage runs or not
+    # 4. the plan: which stages this scene needs, and why (engine/plan.py)
     photon, pmap = None, None
-    emits = (not lights.empty) or arrays.has_emission
-    if settings.mode == "full" and settings.bounces == 0:
-        reason = "skipped: bounces = 0 (direct light only)"
-    elif not emits:
-        reason = "skipped: nothing emits light"
-    elif not arrays.is_diffuse.any():
-        reason = "skipped: no diffuse surface to store photons on"
-    else:
-        reason = ("indirect light for the full mode" if settings.mode == "full"
-                  else "all light, seen directly (photon-map mode)")
-    report["plan"] = {"mode": settings.mode, "direct_light": settings.mode == "full",
-                      "photons": reason}
-    if not reason.startswith("skipped"):
+    plan = make_plan(scene, settings, lights, arrays)
+    report["plan"] = {"mode": settings.mode, "indirect": settings.indirect,
+                      "stages": plan.to_report(), "summary": plan.summary()}
+    reason = plan.reasons["photons"]
+    if plan["photons"]:
         count = settings.photons or auto_photon_count(pixel_count)
         tell(0.0, f"Photons: tracing {count:,}")
         t0 = time.perf_counter()
         try:
             pmap = build_photon_map(
                 scene, accel, count, seed=settings.seed, max_bounces=settings.bounces,
-                keep="indirect" if settings.mode == "full" else "all", pool=pool,
+                keep="indirect" if settings.mode == "full" and not plan["final_gather"] else "all",
+                pool=pool,
                 progress=lambda f: tell(0.0, f"Photons: {f:.0%} of {count:,} traced"),
                 cancelled=cancelled)
         except BaseException:
@@ -398,10 +435,18 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
         photon_seconds = time.perf_counter() - t0
         radius = settings.photon_radius or auto_max_radius(scene, len(pmap), settings.photon_k)
         lookups = settings.photon_lookups or auto_lookups(pixel_count, settings.samples)
-        photon = _PhotonLookup(pmap, settings.photon_k, radius,
-                               1 if settings.mode == "full" else 0,
-                               CONE_FILTER_K if settings.photon_filter == "cone" else None,
-                               lookups)
+        cone = CONE_FILTER_K if settings.photon_filter == "cone" else None
+        if not plan["final_gather"]:
+            photon = _PhotonEstimate(pmap, settings.photon_k, radius,
+                                     1 if settings.mode == "full" else 0, cone, lookups)
+        else:
+            tell(0.0, "Precomputing irradiance at photons")
+            estimates = RadianceEstimates.build(pmap, k=settings.photon_k, max_radius=radius,
+                                                pool=pool)
+            stage("radiance_estimates", estimates.stats["seconds"],
+                  estimates=estimates.stats["estimates"], bytes=estimates.stats.get("bytes", 0))
+            photon = _FinalGather(estimates, accel, arrays, settings.gather_m, settings.gather_n,
+                                  lookups)
         s = pmap.stats
         stage("photons", photon_seconds, requested=s["requested"], emitted=s["emitted"],
               stored=s["stored"], stored_all=s["stored_all"], kept=s["kept"],

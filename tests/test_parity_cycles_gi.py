@@ -68,7 +68,8 @@ def render_full(name):
 
     build(name)
     scene = export_scene(bpy.context.evaluated_depsgraph_get())
-    results = [render(scene, RenderSettings(mode="full", samples=SAMPLES, photons=PHOTONS, seed=seed))
+    results = [render(scene, RenderSettings(mode="full", indirect="photon-map", samples=SAMPLES,
+                                            photons=PHOTONS, seed=seed))
                for seed in SEEDS]
     return results
 

@@ -52,8 +52,10 @@ class LANTERNA_RENDER_PT_sampling(LanternaPanel, bpy.types.Panel):
     def draw(self, context):
         layout = _split(self.layout)
         settings = context.scene.lanterna
+        layout.prop(settings, "preset")
         layout.prop(settings, "mode")
         col = layout.column(align=True)
+        col.active = settings.preset == 'CUSTOM'
         col.prop(settings, "samples")
         sub = col.column(align=True)
         sub.active = settings.mode == 'FULL'
@@ -78,6 +80,15 @@ class LANTERNA_RENDER_PT_photons(LanternaPanel, bpy.types.Panel):
         col.prop(settings, "photon_radius", text="Max Radius (0 = Auto)")
         layout.prop(settings, "photon_filter")
         layout.prop(settings, "photon_lookups", text="Lookups per Pixel (0 = Auto)")
+        col = layout.column(align=True)
+        col.active = settings.mode == 'FULL'
+        col.prop(settings, "indirect")
+        sub = col.column(align=True)
+        sub.active = settings.indirect != 'PHOTON_MAP' and settings.preset == 'CUSTOM'
+        sub.prop(settings, "gather_m")
+        sub.prop(settings, "gather_n")
+        sub.prop(settings, "cache_error")
+        col.prop(settings, "shadow_photons")
 
 
 class LANTERNA_RENDER_PT_last_render(LanternaPanel, bpy.types.Panel):

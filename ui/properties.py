@@ -74,6 +74,48 @@ class LanternaSceneSettings(bpy.types.PropertyGroup):
         ),
         default='NONE',
     )
+    preset: EnumProperty(
+        name="Preset",
+        description="Quality preset: sets photons, gather, cache error and samples together",
+        items=(
+            ('CUSTOM', "Custom", "Use the settings below"),
+            ('PREVIEW', "Preview", "Fast: 4 spp, 200k photons, gather 6x24, cache error 0.3"),
+            ('FINAL', "Final", "16 spp, 1M photons, gather 12x48, cache error 0.15"),
+        ),
+        default='CUSTOM',
+    )
+    indirect: EnumProperty(
+        name="Indirect",
+        description="How the full mode computes indirect light",
+        items=(
+            ('CACHE', "Irradiance Cache", "Final gather at cached records, interpolated with "
+                                          "gradients (seed chapter 10)"),
+            ('GATHER', "Final Gather", "A final gather at every looked-up sample (slow, "
+                                        "reference quality)"),
+            ('PHOTON_MAP', "Photon Map", "The photon map's estimate at the hit (fast, blotchy)"),
+        ),
+        default='GATHER',
+    )
+    gather_m: IntProperty(
+        name="Gather Theta",
+        description="Final gather: strata in the polar angle (M of M x N rays)",
+        default=8, min=1, max=256, soft_max=64, subtype='NONE',
+    )
+    gather_n: IntProperty(
+        name="Gather Phi",
+        description="Final gather: strata in the azimuth (N of M x N rays)",
+        default=32, min=1, max=1024, soft_max=256, subtype='NONE',
+    )
+    cache_error: FloatProperty(
+        name="Cache Error",
+        description="Irradiance cache: largest error a; records are used where w > 1/a (Eq. 10.3)",
+        default=0.2, min=0.01, max=10.0, soft_max=1.0, precision=3, subtype='NONE',
+    )
+    shadow_photons: BoolProperty(
+        name="Shadow Photons",
+        description="Classify lit, penumbra and umbra with shadow photons to save shadow rays",
+        default=True,
+    )
     photon_lookups: IntProperty(
         name="Lookups per Pixel",
         description=("Camera samples per pixel that ask the photon map; their estimate stands "

@@ -7,6 +7,8 @@ Usage
     ``[--scene scene1|scene2] [--resolution WxH] [--samples N] [--light-samples N]``
     ``[--bounces N] [--seed N] [--threads N] [--mode full|photon-map] [--photons N]``
     ``[--photon-k N] [--photon-radius R] [--photon-filter none|cone] [--photon-lookups N]``
+    ``[--preset custom|preview|final] [--indirect cache|gather|photon-map] [--gather MxN]``
+    ``[--cache-error A] [--no-shadow-photons]``
 
     Renders the active scene of ``SCENE.blend`` with Lanterna (whatever engine the file names),
     or the seed's Scene 1 (``--scene`` picks another) when no file is given. Flags override
@@ -85,6 +87,17 @@ def _float_at_least(lowest: float):
     return parse
 
 
+def _grid(text: str) -> tuple[int, int]:
+    parts = text.lower().replace("×", "x").split("x")
+    try:
+        m, n = (int(p) for p in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected MxN such as 8x32, got {text!r}") from None
+    if not (1 <= m <= 256 and 1 <= n <= 1024):
+        raise argparse.ArgumentTypeError(f"M must be 1-256 and N 1-1024, got {text}")
+    return m, n
+
+
 def _resolution(text: str) -> tuple[int, int]:
     parts = text.lower().replace("×", "x").split("x")
     try:
@@ -130,6 +143,17 @@ def build_parser() -> argparse.ArgumentParser:
                         help="largest estimate radius in metres (0 = automatic)")
     render.add_argument("--photon-filter", choices=("none", "cone"), default=None,
                         help="photon weighting in an estimate (default none)")
+    render.add_argument("--preset", choices=("custom", "preview", "final"), default=None,
+                        help="quality preset (photons, gather, cache error, samples together)")
+    render.add_argument("--indirect", choices=("cache", "gather", "photon-map"), default=None,
+                        help="full mode's indirect light: irradiance cache, a final gather at "
+                             "every sample, or the photon map at the hit")
+    render.add_argument("--gather", type=_grid, metavar="MxN",
+                        help="final gather strata: M in theta x N in phi (default 8x32)")
+    render.add_argument("--cache-error", type=_float_at_least(0.01), metavar="A",
+                        help="irradiance cache error a (default 0.2)")
+    render.add_argument("--no-shadow-photons", action="store_true",
+                        help="trace every shadow ray (no lit/umbra classification)")
     render.add_argument("--photon-lookups", type=_int_at_least(0, 65536), metavar="N",
                         help="camera samples per pixel that ask the photon map (0 = automatic: "
                              "about 300k look-ups per image)")
@@ -210,7 +234,13 @@ def _apply_overrides(scene, args) -> None:
         value = getattr(args, flag)
         if value is not None:
             setattr(settings, flag, value)
-    for flag in ("mode", "photon_filter"):            # core names -> enum identifiers
+    if args.gather is not None:
+        settings.gather_m, settings.gather_n = args.gather
+    if args.cache_error is not None:
+        settings.cache_error = args.cache_error
+    if args.no_shadow_photons:
+        settings.shadow_photons = False
+    for flag in ("mode", "photon_filter", "indirect", "preset"):   # core names -> enum ids
         value = getattr(args, flag)
         if value is not None:
             setattr(settings, flag, value.upper().replace("-", "_"))

@@ -930,7 +930,7 @@ def export_settings(blender_scene) -> RenderSettings:
         except (TypeError, ValueError):
             raise SceneError(f"Render setting '{f.name}' has an invalid value {value!r}")
     # Enum identifiers ('PHOTON_MAP') -> core names ('photon-map').
-    for key in ("mode", "photon_filter"):
+    for key in ("mode", "photon_filter", "indirect", "preset"):
         if key in values:
             values[key] = str(values[key]).lower().replace("_", "-")
     threads = int(values.get("threads", 0))

@@ -1,0 +1,157 @@
+"""The planner: which stages a scene needs, and why, decided before any work (issue 4).
+
+What it computes
+    ``make_plan(scene, settings, lights, arrays)`` -> ``Plan``: for every stage of the
+    pipeline, whether it runs and the reason. The rules simulate only the effects a scene
+    calls for:
+
+    ==================  ==========================================================================
+    stage               runs when
+    ==================  ==========================================================================
+    direct              ``full`` mode and some light or emitter exists
+    photons             light exists, ``bounces`` > 0 (or ``photon-map`` mode), and some
+                        surface reflects (a non-black diffuse or specular material) with a
+                        diffuse surface to store photons on
+    radiance_estimates  photons run and indirect light is gathered (``indirect`` = gather or
+                        cache): irradiance precomputed at photons (Christensen 1999)
+    final_gather        as radiance_estimates
+    irradiance_cache    ``indirect`` = cache; records live on diffuse surfaces only
+    shadow_photons      ``full`` mode, ``shadow_photons`` on, and an area light or emissive mesh
+                        large enough to cast a visible penumbra (its size above
+                        ``MIN_PENUMBRA_SIZE`` x the scene's extent); points, spots and suns
+                        cast hard shadows with one ray and need none
+    specular            some material has specular reflectance
+    ==================  ==========================================================================
+
+    ``settings.force`` (a comma-separated list of stage names) turns a skipped stage on anyway
+    (for checking that the planner's skip changes nothing); a stage that cannot run at all
+    (photons without light) stays off and says so.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+STAGES = ("direct", "photons", "radiance_estimates", "final_gather", "irradiance_cache",
+          "shadow_photons", "specular")
+MIN_PENUMBRA_SIZE = 1e-3
+
+
+@dataclass
+class Plan:
+    runs: dict = field(default_factory=dict)       # stage -> bool
+    reasons: dict = field(default_factory=dict)    # stage -> why it runs or is skipped
+
+    def __getitem__(self, stage: str) -> bool:
+        return bool(self.runs.get(stage, False))
+
+    def set(self, stage: str, run: bool, reason: str):
+        self.runs[stage] = bool(run)
+        self.reasons[stage] = reason if run else f"skipped: {reason}"
+
+    def to_report(self) -> dict:
+        return {stage: self.reasons[stage] for stage in STAGES if stage in self.reasons}
+
+    def summary(self) -> str:
+        """One line for Blender's stats bar: the stages that run."""
+        return "Plan: " + ", ".join(s.replace("_", " ") for s in STAGES if self[s])
+
+
+def _light_size(light) -> float:
+    """A sampled light's size [m] (its largest extent); 0 for suns and the world."""
+    tris = getattr(light, "tris", None)
+    if tris is not None and len(tris):
+        pts = np.asarray(tris, float).reshape(-1, 3)
+        return float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
+    if hasattr(light, "du"):                                  # disk / ellipse
+        return float(2 * max(np.linalg.norm(light.du), np.linalg.norm(light.dv)))
+    return 0.0
+
+
+def make_plan(scene, settings, lights, arrays) -> Plan:
+    plan = Plan()
+    force = {s.strip() for s in str(getattr(settings, "force", "") or "").split(",") if s.strip()}
+    unknown = force - set(STAGES)
+    if unknown:
+        from .scene import SceneError
+        raise SceneError(f"Render settings: force names unknown stages {sorted(unknown)} "
+                         f"(known: {', '.join(STAGES)})")
+    full = settings.mode == "full"
+    emits = (not lights.empty) or arrays.has_emission
+    reflects = bool(np.any(arrays.diffuse > 0) or np.any(arrays.specular > 0))
+
+    # direct light
+    if not full:
+        plan.set("direct", False, "photon-map mode: the photon map holds the direct light")
+    elif not emits:
+        plan.set("direct", False, "no lights, emitters or world light")
+    else:
+        plan.set("direct", True, "exact direct light from every light")
+
+    # photons
+    if not emits:
+        plan.set("photons", False, "nothing emits light")
+    elif full and settings.bounces == 0:
+        plan.set("photons", False, "bounces = 0 (direct light only)")
+    elif not reflects:
+        plan.set("photons", False, "all materials are black: no light bounces")
+    elif not arrays.is_diffuse.any():
+        plan.set("photons", False, "no diffuse surface to store photons on")
+    elif full:
+        plan.set("photons", True, "indirect light")
+    else:
+        plan.set("photons", True, "all light, seen directly (photon-map mode)")
+    if "photons" in force and not plan["photons"]:
+        if emits:
+            plan.set("photons", True, "forced on (the planner would skip it)")
+        else:
+            plan.reasons["photons"] += " (forced, but nothing can emit photons)"
+
+    gathered = full and settings.indirect in ("gather", "cache")
+    for stage in ("radiance_estimates", "final_gather"):
+        if not plan["photons"]:
+            plan.set(stage, False, "no photon map")
+        elif not gathered:
+            plan.set(stage, False, f"indirect = {settings.indirect if full else 'photon map'}: "
+                                   "the photon map is looked up at the hit itself")
+        else:
+            plan.set(stage, True, "indirect light by the final gather over precomputed "
+                                  "irradiance (Christensen 1999)")
+    if not plan["final_gather"]:
+        plan.set("irradiance_cache", False, "no final gather")
+    elif settings.indirect != "cache":
+        plan.set("irradiance_cache", False, "indirect = gather: a gather at every sample")
+    else:
+        diffuse_materials = int(arrays.is_diffuse.sum())
+        plan.set("irradiance_cache", True,
+                 f"records on diffuse surfaces ({diffuse_materials} of "
+                 f"{arrays.material_count} materials)")
+
+    # shadow photons
+    positioned = [light for light in lights.sampled if getattr(light, "kind", "") in ("mesh", "area")]
+    large = [light for light in positioned
+             if _light_size(light) > MIN_PENUMBRA_SIZE * max(scene.extent, 1e-30)]
+    if not full:
+        plan.set("shadow_photons", False, "photon-map mode traces no shadow rays")
+    elif not getattr(settings, "shadow_photons", True):
+        plan.set("shadow_photons", False, "switched off")
+    elif not positioned:
+        plan.set("shadow_photons", False, "no area light or emissive mesh (points, spots and "
+                                          "suns need one shadow ray each)")
+    elif not large:
+        plan.set("shadow_photons", False, "area lights too small to cast a visible penumbra")
+    else:
+        plan.set("shadow_photons", True, f"{len(large)} area/mesh light(s) with penumbrae")
+    if "shadow_photons" in force and not plan["shadow_photons"]:
+        plan.set("shadow_photons", True, "forced on (the planner would skip it)")
+
+    # specular paths
+    if arrays.has_specular:
+        plan.set("specular", True, "specular materials reflect camera and gather rays")
+    else:
+        plan.set("specular", False, "no specular materials")
+    for stage in force - {"photons", "shadow_photons"}:
+        if not plan[stage] and stage != "direct":
+            plan.reasons[stage] += " (cannot be forced)"
+    return plan
