@@ -25,11 +25,12 @@ from . import sampling
 
 
 def pixel_rays(camera, pixel_start: int, pixel_stop: int, samples: int, rng: np.random.Generator,
-               filter_width: float = 1.5):
+               filter_width: float = 1.5, centres: bool = False):
     """Rays for window pixels [pixel_start, pixel_stop) in row-major order, top row first.
 
     Returns (origins (P*S, 3) float32, directions (P*S, 3) float32 unit, tmax (P*S,)),
-    samples of one pixel contiguous.
+    samples of one pixel contiguous. ``centres``: every sample through the pixel's centre
+    (the irradiance cache's placement passes).
     """
     x0, y0, x1, y1 = camera.border
     win_w, win_h = x1 - x0, y1 - y0
@@ -41,7 +42,10 @@ def pixel_rays(camera, pixel_start: int, pixel_stop: int, samples: int, rng: np.
     # Stratified positions: every pixel visits each of its strata once (the order of the
     # strata carries no information, so no per-pixel shuffle is needed).
     u = sampling.stratified_2d(len(pix), samples, rng, shuffle=False)          # (P, S, 2)
-    off = sampling.filter_offsets(u, filter_width, out=u if u.dtype == np.float32 else None)
+    if centres:
+        off = np.zeros(u.shape, np.float32)
+    else:
+        off = sampling.filter_offsets(u, filter_width, out=u if u.dtype == np.float32 else None)
     scale_x = np.float32(2.0 * camera.tan_half_x / full_w)
     scale_y = np.float32(2.0 * camera.tan_half_y / full_h)
     # Position on the plane z = -1 in camera space: pixel centre (per pixel) plus offset.

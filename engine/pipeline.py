@@ -189,6 +189,134 @@ def _add_to_pixels(pixels: np.ndarray, pixel_of: np.ndarray | None, values: np.n
         pixels[:, c] += np.bincount(pixel_of, weights=values[:, c], minlength=len(pixels))
 
 
+class _CachedIndirect:
+    """Indirect light from the irradiance cache (seed chapter 10): interpolation with the
+    gradients (Eq. 10.5) wherever a record has w > 1/a; elsewhere (points the placement
+    passes did not see: sub-pixel positions, mirror reflections) with w > 1/(2a); and where
+    still no record reaches, a final gather at the point itself, used but not stored (so the
+    picture does not depend on the order batches finish)."""
+
+    def __init__(self, cache, a, gather: _FinalGather, lookups):
+        self.cache, self.a, self.gather, self.lookups = cache, a, gather, lookups
+
+    def irradiance(self, x, ns, ng, rng, stats):
+        e, covered, _w, _count = self.cache.interpolate(x, ns, self.a)
+        stats["cache_interpolated"] = stats.get("cache_interpolated", 0) + int(covered.sum())
+        if not covered.all():
+            miss = np.nonzero(~covered)[0]
+            e2, cov2, _w2, _c2 = self.cache.interpolate(x[miss], ns[miss], 2.0 * self.a)
+            e[miss[cov2]] = e2[cov2]
+            stats["cache_relaxed"] = stats.get("cache_relaxed", 0) + int(cov2.sum())
+            rest = miss[~cov2]
+            if len(rest):
+                e[rest] = self.gather.irradiance(x[rest], ns[rest], ng[rest], rng, stats)
+                stats["cache_gathered"] = stats.get("cache_gathered", 0) + len(rest)
+        return e
+
+
+CACHE_STRIDES = (32, 16, 8, 4, 2, 1)     # placement passes: every 32nd pixel, then 16th, ...
+R_MIN_PIXELS = 1.5                       # a record reaches at least this many pixels ...
+R_MAX_PIXELS = 64.0                      # ... and at most this many (R clamped, DESIGN §4)
+
+
+def _limit_translational_gradient(grad, irradiance, radius_raw, radius):
+    """Translational gradients (P, C, 3) made safe to extrapolate with (Krivanek et al. 2008,
+    Tabellion and Lamorlette 2004): where R_i was clamped up from R_raw, the gradient (whose
+    1/min(r) terms R_raw came from) is scaled by R_raw / R_i; and no channel may change by
+    more than its own E_i over the distance R_i (|grad| <= E_i / R_i). Without this a record
+    near a corner (gather distances of a millimetre) extrapolated to 100x its value."""
+    raw = np.where(np.isfinite(radius_raw), radius_raw, radius)
+    grad = grad * np.minimum(1.0, raw / radius)[:, None, None]
+    norm = np.linalg.norm(grad, axis=2)                                   # (P, C)
+    limit = irradiance / radius[:, None]
+    scale = np.where(norm > limit, limit / np.maximum(norm, 1e-300), 1.0)
+    return grad * scale[..., None]
+
+
+def _cache_prepass(scene, accel, arrays, gather: _FinalGather, settings, pool, tell, cancelled):
+    """Place irradiance-cache records in passes of increasing image resolution (Ward's
+    "overture", the seed's cache placement): the first hits of pixel centres on a grid of
+    stride 32, 16, ..., 1; at each pass the points no record covers get new records, computed
+    in batches by the final gather. R_i (harmonic mean distance) is clamped to
+    [R_MIN_PIXELS, R_MAX_PIXELS] pixel footprints divided by a, so a record reaches between
+    1.5 and 64 pixels: corners cannot drive R_i to 0, open walls cannot spread one record
+    over the image."""
+    from .irradiance_cache import IrradianceCache, clamp_radius, irradiance_and_gradients
+
+    cam = scene.camera
+    width, height = cam.window_size
+    rng = sampling.rng_for(settings.seed, sampling.STREAM_GATHER, 1 << 20)
+    origins, directions, tmax = pixel_rays(cam, 0, width * height, 1, rng, centres=True)
+    t_hit, prim, bu, bv = accel.intersect(origins, directions, tmax)
+    hit = prim >= 0
+    pixel = np.nonzero(hit)[0]
+    t_hit, prim, bu, bv = t_hit[hit], prim[hit], bu[hit], bv[hit]
+    d = directions[hit]
+    x = origins[hit] + t_hit[:, None] * d
+    ng, ns, _front = _surface_normals(arrays, prim, bu, bv, d)
+    diffuse = arrays.is_diffuse[arrays.material_ids[prim]]
+    pixel, x, ng, ns, t_hit = pixel[diffuse], x[diffuse], ng[diffuse], ns[diffuse], t_hit[diffuse]
+    footprint = t_hit.astype(np.float64) * (2.0 * cam.tan_half_x / cam.resolution[0])
+    a = settings.cache_error
+    cache = IrradianceCache()
+    row, col = np.divmod(pixel, width)
+    stats = {"passes": [], "records": 0}
+    chunk = 256
+    for pass_index, stride in enumerate(CACHE_STRIDES):
+        if cancelled is not None and cancelled():
+            break
+        on_grid = (row % stride == 0) & (col % stride == 0)
+        idx = np.nonzero(on_grid)[0]
+        if len(cache) and len(idx):
+            _e, covered, _w, _c = cache.interpolate(x[idx], ns[idx], a, count_usage=False)
+            idx = idx[~covered]
+        made = 0
+        if len(idx):
+            parts = [idx[i:i + chunk] for i in range(0, len(idx), chunk)]
+
+            def record(part, number):
+                prng = sampling.rng_for(settings.seed, sampling.STREAM_GATHER,
+                                        (pass_index << 16) + number)
+                e, radiance, dist = final_gather(x[part], ns[part], ng[part], gather.estimates,
+                                                 accel, arrays, prng, gather.m, gather.n)
+                frames = sampling.orthonormal_basis(ns[part].astype(np.float64)) + (ns[part].astype(np.float64),)
+                g = irradiance_and_gradients(radiance, dist, gather.m, gather.n, frames)
+                radius = clamp_radius(g.radius, R_MIN_PIXELS * footprint[part] / a,
+                                      R_MAX_PIXELS * footprint[part] / a)
+                trans = _limit_translational_gradient(g.trans_grad, g.irradiance, g.radius, radius)
+                return part, g.irradiance, radius, g.rot_grad, trans
+
+            for part, e, radius, rot, trans in pool.map(record, parts, range(len(parts))):
+                cache.add(x[part], ns[part], e, radius, rot, trans)
+                made += len(part)
+        stats["passes"].append({"stride": stride, "new_records": made})
+        tell((pass_index + 1) / len(CACHE_STRIDES),
+             f"Irradiance cache: pass {pass_index + 1}/{len(CACHE_STRIDES)}, {len(cache):,} records")
+    stats["records"] = len(cache)
+    return cache, stats
+
+
+def _surface_normals(arrays: _SceneArrays, prim, bu, bv, d):
+    """At hits of rays ``d`` on triangles ``prim`` (barycentrics bu, bv): the geometric normal
+    turned towards the viewer, the shading normal (interpolated; the geometric one where the
+    mesh is flat or the interpolated one faces away), and whether the front side was hit."""
+    ng = np.take(arrays.geometric_normals, prim, axis=0)  # take: faster than ng[prim]
+    facing = sampling.dot_rows(ng, d)
+    front = facing < 0                                   # the ray meets the wound front side
+    if not front.all():                                  # turn ng towards the viewer
+        sampling.scale_rows(ng, np.where(front, np.float32(1), np.float32(-1)), out=ng)
+    if arrays.shading_normals is None:
+        return ng, ng, front
+    corner = arrays.shading_normals[prim]
+    w = np.stack([1.0 - bu - bv, bu, bv], axis=1)[..., None]
+    ns = (corner * w).sum(axis=1)
+    ns = np.where(front[:, None], ns, -ns)
+    ns /= np.maximum(np.linalg.norm(ns, axis=1, keepdims=True), 1e-12)
+    # A shading normal that points away from the viewer would shade the wrong side.
+    ns = np.where((np.einsum("ij,ij->i", ns, d) < 0)[:, None], ns, ng).astype(np.float32)
+    return ng, ns, front
+
+
 # Above this many materials the per-(pixel, material) histogram of the diffuse term gets big.
 MAX_HISTOGRAM_MATERIALS = 64
 
@@ -236,7 +364,8 @@ def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArr
     """Radiance for the pixels of one batch: (pixels, 3) mean over their samples."""
     stats = {"camera_rays": 0, "shadow_rays": 0, "specular_rays": 0,
              "trace_seconds": 0.0, "seconds": 0.0, "queries": 0, "query_seconds": 0.0,
-             "estimate_seconds": 0.0}
+             "estimate_seconds": 0.0, "cache_interpolated": 0, "cache_relaxed": 0,
+             "cache_gathered": 0, "gather_rays": 0, "gather_points": 0}
     direct_light = settings.mode == "full"
     started = time.perf_counter()
     rng = sampling.rng_for(settings.seed, sampling.STREAM_CAMERA, batch)
@@ -279,21 +408,7 @@ def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArr
         pixel_of = None if in_order else rays // spp
         x = sampling.scale_rows(d, t_hit)
         x += o
-        ng = np.take(arrays.geometric_normals, prim, axis=0)  # take: faster than ng[prim]
-        facing = sampling.dot_rows(ng, d)
-        front = facing < 0                                   # the ray meets the wound front side
-        if not front.all():                                  # turn ng towards the viewer
-            sampling.scale_rows(ng, np.where(front, np.float32(1), np.float32(-1)), out=ng)
-        if arrays.shading_normals is not None:
-            corner = arrays.shading_normals[prim]
-            w = np.stack([1.0 - bu - bv, bu, bv], axis=1)[..., None]
-            ns = (corner * w).sum(axis=1)
-            ns = np.where(front[:, None], ns, -ns)
-            ns /= np.maximum(np.linalg.norm(ns, axis=1, keepdims=True), 1e-12)
-            # A shading normal that points away from the viewer would shade the wrong side.
-            ns = np.where((np.einsum("ij,ij->i", ns, d) < 0)[:, None], ns, ng).astype(np.float32)
-        else:
-            ns = ng
+        ng, ns, front = _surface_normals(arrays, prim, bu, bv, d)
         mat = arrays.material_ids[prim]
 
         if arrays.has_emission:
@@ -412,7 +527,7 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
     pool = ThreadPoolExecutor(settings.worker_count)
 
     # 4. the plan: which stages this scene needs, and why (engine/plan.py)
-    photon, pmap = None, None
+    photon, pmap, cache = None, None, None
     plan = make_plan(scene, settings, lights, arrays)
     report["plan"] = {"mode": settings.mode, "indirect": settings.indirect,
                       "stages": plan.to_report(), "summary": plan.summary()}
@@ -447,6 +562,19 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
                   estimates=estimates.stats["estimates"], bytes=estimates.stats.get("bytes", 0))
             photon = _FinalGather(estimates, accel, arrays, settings.gather_m, settings.gather_n,
                                   lookups)
+            if plan["irradiance_cache"]:
+                t0 = time.perf_counter()
+                cache, cache_stats = _cache_prepass(scene, accel, arrays, photon, settings, pool,
+                                                    tell, cancelled)
+                # Prebuild the spatial index once, before the batches share the cache.
+                cache.interpolate(np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]),
+                                  settings.cache_error, count_usage=False)
+                cache.interpolate(np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]),
+                                  2.0 * settings.cache_error, count_usage=False)
+                stage("irradiance_cache", time.perf_counter() - t0, records=cache_stats["records"],
+                      passes=cache_stats["passes"], cache_error=settings.cache_error,
+                      gather=f"{settings.gather_m}x{settings.gather_n}")
+                photon = _CachedIndirect(cache, settings.cache_error, photon, settings.samples)
         s = pmap.stats
         stage("photons", photon_seconds, requested=s["requested"], emitted=s["emitted"],
               stored=s["stored"], stored_all=s["stored_all"], kept=s["kept"],
@@ -478,7 +606,9 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
     ranges = [(p, min(p + batch_pixels, pixel_count)) for p in range(0, pixel_count, batch_pixels)]
     image = np.zeros((pixel_count, 3), np.float32)
     totals = {"camera_rays": 0, "shadow_rays": 0, "specular_rays": 0, "trace_seconds": 0.0,
-              "batch_seconds": 0.0, "queries": 0, "query_seconds": 0.0, "estimate_seconds": 0.0}
+              "batch_seconds": 0.0, "queries": 0, "query_seconds": 0.0, "estimate_seconds": 0.0,
+              "cache_interpolated": 0, "cache_relaxed": 0, "cache_gathered": 0, "gather_rays": 0,
+              "gather_points": 0}
     t0 = time.perf_counter()
     was_cancelled = bool(pmap is not None and pmap.stats["cancelled"])
     done = 0
@@ -504,7 +634,9 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
                 pixels, batch_stats = fut.result()
                 image[a:b] = pixels
                 for key in ("camera_rays", "shadow_rays", "specular_rays", "trace_seconds",
-                                "queries", "query_seconds", "estimate_seconds"):
+                                "queries", "query_seconds", "estimate_seconds",
+                                "cache_interpolated", "cache_relaxed", "cache_gathered",
+                                "gather_rays", "gather_points"):
                     totals[key] += batch_stats[key]
                 totals["batch_seconds"] += batch_stats["seconds"]
                 done += 1
@@ -522,9 +654,21 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
           photon_queries=totals["queries"],
           photon_query_thread_seconds=round(totals["query_seconds"], 6),
           photon_estimate_thread_seconds=round(totals["estimate_seconds"], 6),
+          indirect_thread_seconds=round(totals["estimate_seconds"], 6),
+          gather_points=totals["gather_points"], gather_rays=totals["gather_rays"],
+          cache_interpolated=totals["cache_interpolated"], cache_relaxed=totals["cache_relaxed"],
+          cache_gathered=totals["cache_gathered"],
           thread_seconds=round(totals["batch_seconds"], 6),
           rays_per_second=rays / camera_seconds if camera_seconds > 0 else 0.0)
 
+    if cache is not None and len(cache):
+        # How many pixels each record served (interpolated samples / samples per pixel).
+        served = cache.usage / settings.samples
+        stages["irradiance_cache"].update(
+            pixels_per_record_mean=round(float(served.mean()), 2),
+            pixels_per_record_median=round(float(np.median(served)), 2),
+            pixels_per_record_max=round(float(served.max()), 2),
+            records_unused=int((served == 0).sum()), bytes=int(cache.stats().get("bytes", 0)))
     report["rays"] = {"camera": totals["camera_rays"], "shadow": totals["shadow_rays"],
                       "specular": totals["specular_rays"], "total": rays}
     report["scene"] = {"triangles": int(len(scene.triangles)), "materials": len(scene.materials),
