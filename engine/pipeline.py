@@ -5,18 +5,27 @@ What it computes
     [W m^-2 sr^-1], (H, W, 3) float32, row 0 at the top of the render window) and a report.
 
 Stages, in order (DESIGN.md §1)
-    1. ``validate``     check the scene, drop untraceable triangles (counted, named)
-    2. ``accel_build``  Embree BVH over all triangles
-    3. ``lights``       sort lights into exactly evaluated and sampled ones
-    4. ``photons``      emit, trace and store photons, build the kd-tree (``engine/photons.py``;
-                        skipped when ``bounces`` = 0 in ``full`` mode, or when nothing emits)
-    5. ``camera``       primary rays in batches of whole pixels; at each diffuse hit the
-                        emission plus, by ``mode``:
-                        ``full``: exact direct light (``engine/direct.py``) + indirect light
-                        from the photon map (photons that bounced at least once);
-                        ``photon-map``: the photon-map estimate of all light (seed 9.5).
-                        Perfect specular surfaces reflect the camera ray (up to
-                        ``max_specular_depth``).
+    1. ``validate``            check the scene, drop untraceable triangles (counted, named)
+    2. ``accel_build``         Embree BVH over all triangles
+    3. ``lights``              sort lights into exactly evaluated and sampled ones
+    4. the plan                ``engine/plan.py``: which of the stages below this scene needs,
+                               each with its reason, before any work
+    5. ``photons``             emit, trace and store photons, build the kd-tree
+                               (``engine/photons.py``)
+    6. ``radiance_estimates``  irradiance precomputed at a quarter of the photons
+                               (Christensen 1999, ``engine/gather.py``)
+    7. ``irradiance_cache``    records placed in passes at pixel strides 32, 16, ..., 1 by the
+                               final gather, with Ward & Heckbert gradients
+                               (``engine/irradiance_cache.py``)
+    8. ``camera``              primary rays in batches of whole pixels; at each diffuse hit the
+                               emission plus, by ``mode``:
+                               ``full``: exact direct light (``engine/direct.py``) + indirect
+                               light by ``indirect``: ``cache`` (interpolated records),
+                               ``gather`` (a final gather per looked-up sample) or
+                               ``photon-map`` (the estimate at the hit, photons that bounced);
+                               ``photon-map``: the photon-map estimate of all light (seed 9.5).
+                               Perfect specular surfaces reflect the camera ray (up to
+                               ``max_specular_depth``).
 
     Batches are independent (each has its own random stream from (seed, batch)), so they run
     on a thread pool (embreex and numpy release the GIL) and a fixed seed gives the same
@@ -37,10 +46,19 @@ Settings (``RenderSettings``)
     photon_radius          0.0       cap on the estimate's radius [m]; 0 = automatic (4x the
                                      radius holding k photons spread evenly over the scene)
     photon_filter          none      ``none`` or ``cone`` (Jensen's cone filter, k = 1.1)
-    photon_lookups         0         camera samples per pixel that ask the photon map; their
-                                     estimate stands for the pixel's other samples too.
-                                     0 = automatic: about 300k look-ups per image, at least
-                                     1 and at most ``samples`` per pixel
+    photon_lookups         0         camera samples per pixel that ask for indirect light
+                                     (photon map, gather or cache); their value stands for
+                                     the pixel's other samples too. 0 = automatic: about
+                                     300k look-ups per image, between 1 and ``samples``
+    indirect               cache     ``full`` mode's indirect light: ``cache``, ``gather`` or
+                                     ``photon-map`` (see stage 8)
+    gather_m, gather_n     8, 32     final gather strata in theta and phi (M x N rays)
+    cache_error            0.2       irradiance cache error a: records serve where w > 1/a
+    shadow_photons         True      lit / penumbra / umbra classes from shadow photons
+    force                  ""        comma-separated stages to run although the plan skips
+                                     them (checks that a skip changes nothing)
+    preset                 custom    ``preview`` / ``final`` set samples, light samples,
+                                     photons, gather and cache error together
     seed                   0         random seed; same seed, same image
     threads                0         worker threads; 0 = all cores
     filter_width           1.5       Blackman-Harris pixel filter width [px]
@@ -100,7 +118,7 @@ class RenderSettings:
     photon_radius: float = 0.0
     photon_filter: str = "none"
     photon_lookups: int = 0
-    indirect: str = "gather"
+    indirect: str = "cache"
     gather_m: int = 8
     gather_n: int = 32
     cache_error: float = 0.2
@@ -574,7 +592,7 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
                 stage("irradiance_cache", time.perf_counter() - t0, records=cache_stats["records"],
                       passes=cache_stats["passes"], cache_error=settings.cache_error,
                       gather=f"{settings.gather_m}x{settings.gather_n}")
-                photon = _CachedIndirect(cache, settings.cache_error, photon, settings.samples)
+                photon = _CachedIndirect(cache, settings.cache_error, photon, lookups)
         s = pmap.stats
         stage("photons", photon_seconds, requested=s["requested"], emitted=s["emitted"],
               stored=s["stored"], stored_all=s["stored_all"], kept=s["kept"],

@@ -94,7 +94,7 @@ class LanternaSceneSettings(bpy.types.PropertyGroup):
                                         "reference quality)"),
             ('PHOTON_MAP', "Photon Map", "The photon map's estimate at the hit (fast, blotchy)"),
         ),
-        default='GATHER',
+        default='CACHE',
     )
     gather_m: IntProperty(
         name="Gather Theta",
