@@ -18,6 +18,21 @@ Parameters
     Shadow rays start ``accel.offset_origins`` off the surface and stop short of the light by
     the same relative offset, so lights touching surfaces do not shadow themselves.
 
+Shadow photons (seed 7.2, 9.6; ``engine/shadow_photons.py``)
+    With ``shadow_map`` given, each (point, sampled light) pair whose light has shadow
+    photons is classified once, and all the point's samples of that light follow its class:
+    LIT: visibility 1, no ray (a sample whose direction lies below the geometric surface is
+    traced as before); UMBRA: no light, no ray; PENUMBRA: each of the pair's samples is
+    replaced by ``shadow_map.penumbra_factor`` = M fresh stratified samples of the same light,
+    each weighted f / (p_select K M) and traced. The class depends on the point and the light
+    only, never on a sample's numbers, so the penumbra estimate stays unbiased: the M samples
+    have the same expectation as the one they replace. ``stats`` then also count
+    ``shadow_rays_saved`` (the rays a plain call with the same light samples traces, minus the
+    rays traced; negative where penumbrae cost more than they save) and ``shadow_lit``,
+    ``shadow_umbra``, ``shadow_penumbra`` (classified pairs). Suns with an angle, the world
+    and delta lights keep plain shadow rays. Without a map the code path, the random numbers
+    and the results are those of a plain call.
+
 All shadow rays of a call go to Embree in one batch.
 """
 from __future__ import annotations
@@ -29,16 +44,21 @@ import numpy as np
 from . import sampling
 from .lights import LightSet
 
+LIT, UMBRA, PENUMBRA = 0, 1, 2          # shadow-photon classes (engine/shadow_photons.py)
+
 
 def direct_irradiance(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.random.Generator,
                       light_samples: int = 4, stats: dict | None = None,
-                      offset_normals: np.ndarray | None = None, ray_log: list | None = None) -> np.ndarray:
+                      offset_normals: np.ndarray | None = None, ray_log: list | None = None,
+                      shadow_map=None) -> np.ndarray:
     """Irradiance (N, 3) at points ``x`` with unit normals ``n`` (facing the viewer).
 
     ``offset_normals`` (default ``n``) are the geometric normals used to push shadow-ray
     origins off the surface; ``stats`` receives ``shadow_rays`` and ``trace_seconds``.
+    ``shadow_map``: a ``ShadowPhotonMap`` that classifies points (see the module docstring).
     """
-    terms = direct_terms(x, n, lights, accel, rng, light_samples, stats, offset_normals, ray_log)
+    terms = direct_terms(x, n, lights, accel, rng, light_samples, stats, offset_normals, ray_log,
+                         shadow_map=shadow_map)
     return irradiance_from_terms(terms, len(x))
 
 
@@ -54,20 +74,26 @@ def irradiance_from_terms(terms, count: int) -> np.ndarray:
 
 def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.random.Generator,
                  light_samples: int = 4, stats: dict | None = None,
-                 offset_normals: np.ndarray | None = None, ray_log: list | None = None) -> list:
+                 offset_normals: np.ndarray | None = None, ray_log: list | None = None,
+                 shadow_map=None) -> list:
     """Irradiance as a list of terms (target, scalar, rgb): term i adds ``scalar * rgb`` to
     points ``target`` (None: every point, in order). Callers that weight the irradiance per
-    point (albedo, pixel) can then do so on scalars instead of (N, 3) arrays."""
+    point (albedo, pixel) can then do so on scalars instead of (N, 3) arrays.
+    ``shadow_map``: a ``ShadowPhotonMap``; None traces every shadow ray (module docstring)."""
     count = len(x)
     if count == 0 or lights.empty:
         return []
 
     # Each entry: (target points, directions, distances, scalar weights, rgb of the light).
     groups = []
+    unshadowed = []     # terms of LIT samples: no shadow ray (shadow photons)
+    tally = None if shadow_map is None else {"plain": 0, "lit": 0, "umbra": 0, "penumbra": 0}
 
     # Delta lights: one ray per light and lit point.
     for w, dist, weight, rgb in lights.delta_rays(x, n):
         live = weight > 0
+        if tally is not None:
+            tally["plain"] += int(live.sum())
         if live.all():
             groups.append((None, w, dist, weight, rgb, False))
         elif live.any():
@@ -94,12 +120,20 @@ def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.
             w, dist, weight = light.sample(x[pts], n[pts], u2[sel])
             weight = weight / (p_sel[sel] * k)
             live = (weight > 0) & np.isfinite(weight)
+            if shadow_map is not None and shadow_map.covers(li):
+                _classified_samples(groups, unshadowed, tally, shadow_map, li, light, x, n,
+                                    offset_normals, accel, rng, k, pts, p_sel[sel],
+                                    w, dist, weight, live)
+                continue
+            if tally is not None:
+                tally["plain"] += int(live.sum())
             if live.any():
                 groups.append((pts[live], w[live], dist[live], weight[live], light.rgb,
                                getattr(light, 'in_bvh', False)))
 
     if not groups:
-        return []
+        _count_classes(stats, tally, 0)
+        return unshadowed
     single = len(groups) == 1 and groups[0][0] is None
     if single:
         target = None
@@ -150,4 +184,67 @@ def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.
     if stats is not None:
         stats["shadow_rays"] = stats.get("shadow_rays", 0) + len(org)
         stats["trace_seconds"] = stats.get("trace_seconds", 0.0) + traced
-    return terms
+    _count_classes(stats, tally, len(org))
+    return terms + unshadowed
+
+
+def _count_classes(stats, tally, traced):
+    """Shadow-photon counters: rays saved against a plain call, classified pairs."""
+    if stats is None or tally is None:
+        return
+    stats.setdefault("shadow_rays", 0)
+    stats["shadow_rays_saved"] = stats.get("shadow_rays_saved", 0) + tally["plain"] - traced
+    for name in ("lit", "umbra", "penumbra"):
+        stats["shadow_" + name] = stats.get("shadow_" + name, 0) + tally[name]
+
+
+def _classified_samples(groups, unshadowed, tally, shadow_map, li, light, x, n, offset_normals,
+                        accel, rng, k, pts, p_sel, w, dist, weight, live):
+    """The samples of sampled light ``li`` at points ``pts`` (sorted), by their pair's class:
+    LIT terms go to ``unshadowed``, PENUMBRA samples (M per original) to ``groups``."""
+    in_bvh = getattr(light, "in_bvh", False)
+    tally["plain"] += int(live.sum())
+    # One class per (point, light): pts is sorted, so its distinct values are runs.
+    first = np.empty(len(pts), bool)
+    first[0] = True
+    np.not_equal(pts[1:], pts[:-1], out=first[1:])
+    points = pts[first]
+    geo = n if offset_normals is None else offset_normals
+    pair = shadow_map.classify(x[points], geo[points], li)
+    cls = pair[np.cumsum(first) - 1]
+    for name, c in zip(("lit", "umbra", "penumbra"), (LIT, UMBRA, PENUMBRA)):
+        tally[name] += int(np.count_nonzero(pair == c))
+
+    # LIT: visibility 1 without a ray, unless the direction leaves below the geometric surface
+    # (shading normals): such a sample is traced as a plain call would.
+    lit = np.flatnonzero(live & (cls == LIT))
+    if len(lit):
+        p = pts[lit]
+        below = sampling.dot_rows(np.ascontiguousarray(geo[p], np.float64), w[lit]) <= 0
+        # As the traced rays: a light closer than the ray offsets is not seen.
+        near = dist[lit] <= 2.0 * accel.offset_distance(x[p])
+        trace = below & ~near
+        keep = ~below & ~near
+        if keep.any():
+            unshadowed.append((p[keep], weight[lit[keep]], light.rgb))
+        if trace.any():
+            t = lit[trace]
+            groups.append((pts[t], w[t], dist[t], weight[t], light.rgb, in_bvh))
+    # UMBRA: no light, no ray. PENUMBRA: every sample of the pair (live or not: the class
+    # must not depend on the sample's numbers) becomes M fresh stratified samples.
+    pen = np.flatnonzero(cls == PENUMBRA)
+    if len(pen) == 0:
+        return
+    m = int(max(1, shadow_map.penumbra_factor))
+    if m == 1:
+        t = pen[live[pen]]
+        if len(t):
+            groups.append((pts[t], w[t], dist[t], weight[t], light.rgb, in_bvh))
+        return
+    p = np.repeat(pts[pen], m)
+    u = sampling.stratified_2d(len(pen), m, rng).reshape(-1, 2)
+    w_m, dist_m, weight_m = light.sample(x[p], n[p], u)
+    weight_m = weight_m / (np.repeat(p_sel[pen], m) * (k * m))
+    ok = (weight_m > 0) & np.isfinite(weight_m)
+    if ok.any():
+        groups.append((p[ok], w_m[ok], dist_m[ok], weight_m[ok], light.rgb, in_bvh))

@@ -168,7 +168,10 @@ def _occluded_room(scale):
 
 @pytest.mark.parametrize("scale", [1e-3, 1e3])
 def test_scaled_scene_renders_the_same(scale):
-    settings = RenderSettings(samples=16, light_samples=4, seed=11, bounces=0)
+    # Shadow photons off: their classes may flip at a boundary under round-off, which changes
+    # the random stream of a batch (noise, not round-off); scale invariance of the classes
+    # themselves is tested in test_shadow_photons.py.
+    settings = RenderSettings(samples=16, light_samples=4, seed=11, bounces=0, shadow_photons=False)
     reference = render(_occluded_room(1.0), settings).image
     scaled = render(_occluded_room(scale), settings).image
     assert np.all(np.isfinite(scaled))

@@ -38,16 +38,22 @@ Global illumination (``--gi``): the same, with all bounces, into ``tests/data/cy
 resolution and builder). Scenes ``GI_SCENES``: ``scene1``, the seed's Scene 1
 (``lanterna.engine.blender.seed_scenes.build("scene1")``: closed box, radius-0 point light,
 Diffuse BSDF, black world) rendered at 160 x 120 with its own camera; ``cornell``,
-``tests/parity_scenes.py:build_cornell`` (80 x 60, square area light hidden from the camera).
+``tests/parity_scenes.py:build_cornell`` (80 x 60, square area light hidden from the camera);
+``scene2``, the seed's Scene 2 (``seed_scenes.build("scene2")``: closed room, radius-0 point
+light inside a ceiling tube, torus knot, red cylinder, Diffuse BSDF, black world) at 160 x 120
+with its own camera.
 Settings as above except ``max_bounces = diffuse_bounces = glossy_bounces =
 transmission_bounces = GI_BOUNCES`` (64), volume 0, transparent 8, caustics reflective and
 refractive on, ``blur_glossy = 0``, path guiding off; ``GI_SAMPLES[name]`` samples per seed,
-chosen so that every bright block's relative SE is < 0.3 % (measured 0.16 % and 0.11 %).
+chosen so that every bright block's relative SE is < 0.3 % (measured 0.16 % and 0.11 %) for
+``scene1`` and ``cornell``; ``scene2`` (lit almost only indirectly, from the light pool and the
+tube's inside) is far noisier and got what fits in ~8 min (see ``tests/data/README.md``).
 Lights inside the frame are allowed only if Cycles does not draw them (radius-0 point/spot
 lights, ``visible_camera = False``).
 
 The core of Lanterna is not imported: only bpy, numpy, OpenEXR and ``tests/parity_scenes``
-(and, for ``--gi scene1``, Lanterna's bpy scene builder ``engine/blender/seed_scenes.py``).
+(and, for ``--gi scene1`` / ``scene2``, Lanterna's bpy scene builder
+``engine/blender/seed_scenes.py``).
 """
 from __future__ import annotations
 
@@ -81,22 +87,24 @@ SAMPLES = {          # per seed; every bright block's relative SE comes out < 0.
 # --gi: all bounces, written to cycles_gi/
 OUT_GI = HERE / "cycles_gi"
 GI_BOUNCES = 64
-GI_SCENES = ("scene1", "cornell")
+GI_SCENES = ("scene1", "cornell", "scene2")
 GI_SAMPLES = {       # per seed; every bright block's relative SE comes out < 0.3 %
     "scene1": 768,
     "cornell": 2560,
+    "scene2": 768,     # the most that fits in ~8 min: worst bright block 2 % (see README)
 }
-GI_RESOLUTION = {"scene1": (160, 120)}   # others: the builder's own
+GI_RESOLUTION = {"scene1": (160, 120), "scene2": (160, 120)}   # others: the builder's own
+SEED_SCENES = ("scene1", "scene2")   # built by Lanterna's engine/blender/seed_scenes.py
 
 
 def _build_gi(name: str):
-    """(scene, builder label) of GI scene ``name``: the seed's Scene 1 (Lanterna's own
+    """(scene, builder label) of GI scene ``name``: the seed's Scene 1 or 2 (Lanterna's own
     builder, imported here only: bpy scene code, not the renderer) or a GI scene of
     ``tests/parity_scenes.py``, at ``GI_RESOLUTION`` where given."""
-    if name == "scene1":
+    if name in SEED_SCENES:
         from lanterna.engine.blender import seed_scenes
-        scene = seed_scenes.build("scene1")
-        label = "engine/blender/seed_scenes.py:build_scene1"
+        scene = seed_scenes.build(name)
+        label = f"engine/blender/seed_scenes.py:build_{name}"
     else:
         scene = parity_scenes.build(name)
         label = f"tests/parity_scenes.py:{parity_scenes.GI_SCENES[name].__name__}"
