@@ -54,6 +54,7 @@ Settings (``RenderSettings``)
                                      ``photon-map`` (see stage 8)
     gather_m, gather_n     8, 32     final gather strata in theta and phi (M x N rays)
     cache_error            0.2       irradiance cache error a: records serve where w > 1/a
+    cache_gradients        True      interpolate with the records' gradients (Eq. 10.5)
     shadow_photons         True      lit / penumbra / umbra classes from shadow photons
     force                  ""        comma-separated stages to run although the plan skips
                                      them (checks that a skip changes nothing)
@@ -122,6 +123,7 @@ class RenderSettings:
     gather_m: int = 8
     gather_n: int = 32
     cache_error: float = 0.2
+    cache_gradients: bool = True
     shadow_photons: bool = True
     force: str = ""
     preset: str = "custom"
@@ -215,11 +217,13 @@ class _CachedIndirect:
     does not depend on the order batches finish). Reaching for records with a relaxed error
     instead was measured 2x too bright along a box's contact with the floor."""
 
-    def __init__(self, cache, a, gather: _FinalGather, lookups):
+    def __init__(self, cache, a, gather: _FinalGather, lookups, use_gradients=True):
         self.cache, self.a, self.gather, self.lookups = cache, a, gather, lookups
+        self.use_gradients = use_gradients
 
     def irradiance(self, x, ns, ng, rng, stats):
-        e, covered, _w, _count = self.cache.interpolate(x, ns, self.a)
+        e, covered, _w, _count = self.cache.interpolate(x, ns, self.a,
+                                                        use_gradients=self.use_gradients)
         stats["cache_interpolated"] = stats.get("cache_interpolated", 0) + int(covered.sum())
         if not covered.all():
             rest = np.nonzero(~covered)[0]
@@ -611,7 +615,8 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
                 stage("irradiance_cache", time.perf_counter() - t0, records=cache_stats["records"],
                       passes=cache_stats["passes"], cache_error=settings.cache_error,
                       gather=f"{settings.gather_m}x{settings.gather_n}")
-                photon = _CachedIndirect(cache, settings.cache_error, photon, lookups)
+                photon = _CachedIndirect(cache, settings.cache_error, photon, lookups,
+                                         settings.cache_gradients)
         s = pmap.stats
         stage("photons", photon_seconds, requested=s["requested"], emitted=s["emitted"],
               stored=s["stored"], stored_all=s["stored_all"], kept=s["kept"],

@@ -1,0 +1,85 @@
+"""The irradiance cache against the per-pixel final gather it interpolates (issue 4; no bpy).
+
+Both renders share the seed, so the photon map and the precomputed irradiance are the same;
+only where the indirect light is computed differs: a final gather at every pixel sample
+(``indirect = gather``, 16 x 64 rays) or records placed in passes and interpolated
+(``indirect = cache``). Measured on the box below (48 x 36, 2 spp, seed 3): a = 0.2 worst
+4 x 4 block 0.6 % off the per-pixel gather; a = 0.5 worst block 2.6 % with gradients and
+9.7 % without, pixel RMS 3.3 % against 5.7 %. The bounds: 2 % (the issue's), and gradients
+must cut the RMS to at most 0.75 x (measured 0.59 x; the per-pixel gather's own noise, about
+1 % RMS, is in both figures).
+"""
+import numpy as np
+import pytest
+
+from analytic import box_room, quad
+from lanterna.engine.pipeline import RenderSettings, render
+from lanterna.engine.scene import Camera, Material, PointLight, Scene
+
+BASE = dict(samples=2, photons=300_000, seed=3, gather_m=16, gather_n=64)
+
+
+def _room():
+    tris = box_room(size=(4.0, 4.0, 3.0))
+    ids = np.zeros(len(tris), np.int32)
+    ids[6:8] = 1                                            # a red right wall
+    return Scene(triangles=tris, material_ids=ids,
+                 materials=[Material("white", diffuse=0.7), Material("red", diffuse=[0.7, 0.2, 0.1])],
+                 camera=Camera.look_at([2.0, 0.3, 1.5], [2.0, 4.0, 1.2], resolution=(48, 36),
+                                       fov_x_deg=80),
+                 lights=[PointLight("P", [3.2, 2.5, 2.6], [60.0] * 3)])
+
+
+def _blocks(image):
+    return image.reshape(4, 9, 4, 12, 3).astype(np.float64).mean(axis=(1, 3))
+
+
+@pytest.fixture(scope="module")
+def per_pixel_gather():
+    return render(_room(), RenderSettings(indirect="gather", **BASE))
+
+
+def test_cache_agrees_with_the_per_pixel_gather(per_pixel_gather):
+    cached = render(_room(), RenderSettings(indirect="cache", cache_error=0.2, **BASE))
+    assert np.all(np.isfinite(cached.image)) and cached.image.min() >= 0     # corners included
+    ratio = _blocks(cached.image) / _blocks(per_pixel_gather.image)
+    assert np.abs(ratio - 1).max() <= 0.02, np.round(ratio[..., 0], 4)
+    stage = cached.report["stages"]["irradiance_cache"]
+    assert stage["records"] > 50 and stage["pixels_per_record_mean"] > 1
+    assert [p["stride"] for p in stage["passes"]] == [32, 16, 8, 4, 2, 1]
+
+
+def test_gradients_lower_the_interpolation_error(per_pixel_gather):
+    ref = per_pixel_gather.image.astype(np.float64)
+
+    def rms(gradients):
+        image = render(_room(), RenderSettings(indirect="cache", cache_error=0.5,
+                                               cache_gradients=gradients, **BASE)).image
+        return np.sqrt(((image - ref) ** 2).mean()) / ref.mean()
+
+    with_gradients, without = rms(True), rms(False)
+    assert with_gradients <= 0.75 * without, (with_gradients, without)
+
+
+def test_thin_plate_lit_from_both_sides_keeps_its_sides_apart():
+    """A plate in the middle of a room, a red lamp above and a blue lamp below. Records on one
+    side must never serve the other (n . n_i < 0): looking at either side, the cache agrees
+    with the per-pixel gather within 3 % per channel on the plate, and the top stays red."""
+    room = box_room(size=(4.0, 4.0, 3.0))
+    plate = quad([2.0, 2.0, 1.5], [1.2, 0, 0], [0, 1.2, 0])
+    tris = np.concatenate([room, plate])
+    lights = [PointLight("Red", [2.0, 2.0, 2.6], [40.0, 0.0, 0.0]),
+              PointLight("Blue", [2.0, 2.0, 0.4], [0.0, 0.0, 40.0])]
+    materials = [Material("white", diffuse=0.7)]
+    for eye, target in (([2.0, 0.6, 2.8], [2.0, 2.0, 1.5]), ([2.0, 0.6, 0.2], [2.0, 2.0, 1.5])):
+        scene = Scene(triangles=tris, material_ids=np.zeros(len(tris), np.int32),
+                      materials=materials, lights=lights,
+                      camera=Camera.look_at(eye, target, resolution=(24, 18), fov_x_deg=30))
+        cached = render(scene, RenderSettings(indirect="cache", **BASE)).image
+        gathered = render(scene, RenderSettings(indirect="gather", **BASE)).image
+        assert np.all(np.isfinite(cached))
+        centre = (slice(6, 12), slice(8, 16))                 # on the plate from both views
+        c, g = cached[centre].reshape(-1, 3).mean(0), gathered[centre].reshape(-1, 3).mean(0)
+        np.testing.assert_allclose(c, g, rtol=0.03)
+        top = eye[2] > 1.5
+        assert (c[0] > 5 * c[2]) if top else (c[2] > 5 * c[0])
