@@ -232,6 +232,9 @@ def test_f12_equals_pipeline_and_is_upright(registered, tmp_path, capfd):
     assert np.all(channels["A"] == 1.0)
     assert render_engine.LAST_RENDER["error"] is None
     assert "camera" in render_engine.LAST_RENDER["report"]["stages"]
+    plan = render_engine.LAST_RENDER["report"]["plan"]
+    assert plan["stages"]["shadow_photons"].startswith("skipped: no area light")   # a point light
+    assert plan["summary"].startswith("Plan: direct, photons")
 
     expected = pipeline_image(scene, (32, 24))
     assert expected.shape == image.shape

@@ -5,7 +5,8 @@ poll on ``context.engine``, so they show only while Lanterna is the scene's rend
 
 * Render:   ``LANTERNA_RENDER_PT_sampling`` (mode, samples, light samples, bounces, seed,
             threads), ``LANTERNA_RENDER_PT_photons`` (photon count, k, radius, filter, lookups)
-            and ``LANTERNA_RENDER_PT_last_render`` (stage timings of the last render).
+            and ``LANTERNA_RENDER_PT_last_render`` (stage timings of the last render and its
+            plan: every stage with the reason it ran or was skipped).
 * Material: ``LANTERNA_MATERIAL_PT_surface`` (the node tree's Surface input, to edit the
             shader as in Cycles) and ``LANTERNA_MATERIAL_PT_radiometry`` (the seed's rho_d,
             rho_s and M, greyed out while derived from the nodes; a warning when
@@ -113,6 +114,15 @@ class LANTERNA_RENDER_PT_last_render(LanternaPanel, bpy.types.Panel):
             row.label(text=f"{seconds:.3f} s")
         if "total_time" in last:
             layout.label(text=f"Total {last['total_time']:.3f} s")
+        plan = (last.get("report") or {}).get("plan", {}).get("stages", {})
+        if plan:
+            box = layout.box()
+            box.label(text="Plan")
+            for stage, reason in plan.items():
+                row = box.row()
+                row.label(text=stage.replace("_", " ").capitalize(),
+                          icon='X' if str(reason).startswith("skipped") else 'CHECKMARK')
+                row.label(text=str(reason))
         for text in last.get("warnings", ())[:8]:
             layout.label(text=text, icon='INFO')
 

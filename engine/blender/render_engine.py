@@ -109,7 +109,9 @@ class LanternaRenderEngine(bpy.types.RenderEngine):
         result.layers[0].passes["Combined"].rect.foreach_set(image_to_rect(image))
         self.update_progress(1.0)
         state["cancelled"] = bool(res.cancelled)
-        self.update_stats("Lanterna", "Cancelled" if res.cancelled else "Done")
+        plan = (res.report or {}).get("plan", {}).get("summary", "")
+        self.update_stats("Lanterna", ("Cancelled" if res.cancelled else "Done")
+                          + (f" | {plan}" if plan else ""))
 
     # -- Reporting ----------------------------------------------------------------------------
     def _report_warnings(self, warnings, state):

@@ -1,0 +1,550 @@
+"""Lanterna's ``final`` preset against Cycles on the seed's scenes (issue 4's benchmark).
+
+What it computes (``lanterna bench --vs-cycles`` or
+``python -m lanterna.engine.blender.bench_cycles``)
+    For each scene of ``--scenes`` (the seed's Scene 1 and 2, built by
+    ``engine/blender/seed_scenes.py`` and resized to ``--resolution``), in one process on the
+    same bpy scene:
+
+    1. Lanterna: ``export_scene`` of the evaluated depsgraph, then
+       ``pipeline.render(scene, RenderSettings(preset="final", seed=1))``. Its time is the wall
+       time of the whole ``render`` call (export excluded, printed apart); the stages' seconds
+       come from ``result.report["stages"]``.
+    2. Cycles on the CPU with the settings of the GI references (``configure_cycles(...,
+       gi=True)`` of ``tests/data/make_cycles_refs.py``, imported from it: 64 bounces, caustics
+       on, no clamping, no adaptive sampling, light threshold 0, Blackman-Harris 1.5, no path
+       guiding; a copy of those settings is used where that file cannot be imported, and the
+       output says so) at each of ``--cycles-samples`` (64, 256, 1024), without and with the
+       OpenImageDenoise denoiser (CPU, albedo + normal passes, prefilter ``ACCURATE``). Each is
+       rendered to a float EXR and read back with OpenEXR (row 0 = top); its time is the wall
+       time of ``bpy.ops.render.render(write_still=True)`` (scene sync, BVH, path tracing,
+       denoising and writing the small EXR; reading it back excluded). Cycles' seed is
+       ``CYCLES_SEED``, not one of the references' seeds, so the two are independent. One
+       1-sample Cycles render per process, not timed, loads the kernels first.
+    3. The reference: at 160 x 120, the stored ``tests/data/cycles_gi/<scene>.npz`` (Cycles,
+       same settings, 4 seeds x 768 spp). At any other resolution Cycles renders one at
+       ``--reference-samples`` (4096) split over 2 seeds, cached as
+       ``out/bench_cache/<scene>_<W>x<H>_<spp>.npz`` (relative to the working directory) and
+       reused when present.
+
+Errors (against the reference ``ref``, over all pixels and the three channels)
+    relative RMSE = sqrt(mean((img - ref)^2)) / mean(ref).
+    The reference's own noise adds its per-pixel variance v to every mean squared error
+    (independent seeds), so the table also gives sqrt(max(MSE - v, 0)) / mean(ref), the error
+    against the noise-free picture. v is known per 4 x 4 block for the stored references
+    (``region_se_pixels`` holds the 4 seeds' per-pixel variance, averaged per block) and from
+    the 2 seeds' difference for a rendered one. As a cross-check v is also fitted from Cycles'
+    own 64 and 256 spp errors (MSE = V/spp + v). Since v is the same for every method, the
+    comparisons below come out the same with or without it; only their ratios change.
+    worst block = max over the 4 x 4 blocks of |mean(img) / mean(ref) - 1|, the means taken
+    over the block's pixels and channels.
+
+Checks (issue 4)
+    Lanterna's relative RMSE <= that of Cycles at 256 spp without denoiser, and Lanterna's
+    time <= 1/4 of that Cycles render's time; both printed with their ratios.
+
+Why 160 x 120 by default
+    The issue asks for 640 x 480. A reference clearly less noisy than Cycles-1024 at 640 x 480
+    takes Cycles hours on the 2 shared cores this was written on (Scene 2 needs about 3 min per
+    768 spp even at 160 x 120), whereas the stored 160 x 120 references exist. Pass
+    ``--resolution 640x480`` on a bigger machine: the reference is rendered once and cached.
+    Scene 2's stored reference is noisy (worst 4 x 4 block SE 2 %, see tests/data/README.md):
+    its noise-corrected column is the one to read there.
+
+This is a benchmark, not a test: it asserts nothing, prints the figures and the two checks,
+and ``--json FILE`` saves all of them. Expected failures (a scene that cannot be built or
+exported, a failed Cycles render, a bad flag) print one ``lanterna bench: error: ...`` line.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import math
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+PROG = "lanterna bench --vs-cycles"
+DEFAULT_RESOLUTION = (160, 120)
+DEFAULT_SCENES = ("scene1", "scene2")
+DEFAULT_CYCLES_SAMPLES = (64, 256, 1024)
+DEFAULT_REFERENCE_SAMPLES = 4096
+CYCLES_SEED = 101                 # the stored references use seeds 1-4
+REFERENCE_SEEDS = (201, 202)      # a rendered (cached) reference: 2 seeds, for its noise
+GRID = (4, 4)                     # rows, columns of blocks
+LANTERNA_SEED = 1
+CHECK_SAMPLES = 256               # the Cycles render the issue's checks compare with
+TIME_FRACTION = 0.25
+REPO = Path(__file__).resolve().parents[2]
+STORED_REFERENCES = REPO / "tests" / "data" / "cycles_gi"
+STORED_RESOLUTION = (160, 120)
+CACHE_DIR = Path("out") / "bench_cache"
+SCENE_TITLES = {"scene1": "Scene 1", "scene2": "Scene 2"}
+
+
+class BenchError(Exception):
+    """An expected failure: printed as one line, no traceback."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        raise BenchError(message)
+
+
+def _log(text: str) -> None:
+    print(text, file=sys.stderr, flush=True)
+
+
+# -- Cycles --------------------------------------------------------------------------------------
+GI_BOUNCES = 64
+
+
+def _configure_cycles_copy(scene, samples: int, seed: int, gi: bool = True) -> dict:
+    """Copy of ``configure_cycles(..., gi=True)`` of tests/data/make_cycles_refs.py, used only
+    when that file cannot be imported (an installed package without tests/)."""
+    scene.render.engine = "CYCLES"
+    c = scene.cycles
+    c.device = "CPU"
+    c.samples = samples
+    c.seed = seed
+    c.use_animated_seed = False
+    c.max_bounces = c.diffuse_bounces = c.glossy_bounces = c.transmission_bounces = GI_BOUNCES
+    c.volume_bounces = 0
+    c.transparent_max_bounces = 8
+    c.use_denoising = False
+    c.use_adaptive_sampling = False
+    c.sample_clamp_direct = 0.0
+    c.sample_clamp_indirect = 0.0
+    c.light_sampling_threshold = 0.0
+    c.pixel_filter_type = "BLACKMAN_HARRIS"
+    c.filter_width = 1.5
+    c.caustics_reflective = True
+    c.caustics_refractive = True
+    c.blur_glossy = 0.0
+    c.use_guiding = False
+    scene.render.film_transparent = False
+    scene.render.use_persistent_data = False
+    scene.view_settings.view_transform = "Standard"
+    scene.view_settings.look = "None"
+    scene.view_settings.exposure = 0.0
+    scene.view_settings.gamma = 1.0
+    return {k: getattr(c, k) for k in (
+        "device", "samples", "seed", "max_bounces", "diffuse_bounces", "glossy_bounces",
+        "transmission_bounces", "use_denoising", "use_adaptive_sampling", "sample_clamp_direct",
+        "sample_clamp_indirect", "light_sampling_threshold", "pixel_filter_type", "filter_width",
+        "caustics_reflective", "caustics_refractive", "blur_glossy", "use_guiding")}
+
+
+def _render_exr_copy(scene, path: str):
+    """Copy of ``render_exr`` of tests/data/make_cycles_refs.py: (H, W, 3) float64, row 0 =
+    top, and the wall time of the render call (writing included, reading excluded)."""
+    import bpy
+    import OpenEXR
+
+    fmt = scene.render.image_settings
+    fmt.file_format = "OPEN_EXR"
+    fmt.color_depth = "32"
+    fmt.exr_codec = "ZIP"
+    fmt.color_mode = "RGBA"
+    scene.render.filepath = path
+    scene.render.use_file_extension = False
+    t0 = time.perf_counter()
+    bpy.ops.render.render(write_still=True, scene=scene.name)
+    seconds = time.perf_counter() - t0
+    channels = OpenEXR.File(path).channels()
+    if "RGBA" in channels:
+        pixels = channels["RGBA"].pixels[..., :3]
+    elif "RGB" in channels:
+        pixels = channels["RGB"].pixels
+    else:
+        pixels = np.dstack([channels[k].pixels for k in "RGB"])
+    return np.asarray(pixels, dtype=np.float64), seconds
+
+
+def cycles_functions():
+    """(configure_cycles, render_exr, source) from tests/data/make_cycles_refs.py when it can
+    be imported, else the copies above."""
+    path = REPO / "tests" / "data" / "make_cycles_refs.py"
+    try:
+        spec = importlib.util.spec_from_file_location("make_cycles_refs", path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        return module.configure_cycles, module.render_exr, "imported from tests/data/make_cycles_refs.py"
+    except Exception as exc:  # noqa: BLE001 - any failure: fall back to the copy
+        reason = " ".join(str(exc).split()) or type(exc).__name__
+        return (_configure_cycles_copy, _render_exr_copy,
+                f"copy of tests/data/make_cycles_refs.py settings (import failed: {reason})")
+
+
+def set_denoiser(scene) -> dict:
+    """OpenImageDenoise on the CPU, with albedo and normal passes."""
+    c = scene.cycles
+    c.use_denoising = True
+    c.denoiser = "OPENIMAGEDENOISE"
+    c.denoising_use_gpu = False
+    c.denoising_input_passes = "RGB_ALBEDO_NORMAL"
+    c.denoising_prefilter = "ACCURATE"
+    return {k: getattr(c, k) for k in ("denoiser", "denoising_input_passes",
+                                        "denoising_prefilter", "denoising_quality")}
+
+
+def oidn_available() -> bool:
+    try:
+        import _cycles
+    except ImportError:
+        return False
+    return bool(getattr(_cycles, "with_openimagedenoise", False))
+
+
+# -- Errors --------------------------------------------------------------------------------------
+def block_means(image: np.ndarray, grid=GRID) -> np.ndarray:
+    """(H, W, C) -> (GY, GX) means over equal blocks and the channels."""
+    h, w, c = image.shape
+    gy, gx = grid
+    return image.reshape(gy, h // gy, gx, w // gx, c).mean(axis=(1, 3, 4))
+
+
+def errors(image: np.ndarray, ref: np.ndarray, ref_var: float | None) -> dict:
+    diff = np.asarray(image, np.float64) - ref
+    mse = float(np.mean(diff * diff))
+    mean_ref = float(ref.mean())
+    out = {"mse": mse, "rel_rmse": math.sqrt(mse) / mean_ref}
+    if ref_var is not None:
+        out["rel_rmse_corrected"] = math.sqrt(max(mse - ref_var, 0.0)) / mean_ref
+    ratio = block_means(np.asarray(image, np.float64)) / block_means(ref)
+    out["block_ratios"] = ratio.round(5).tolist()
+    out["worst_block"] = float(np.abs(ratio - 1.0).max())
+    return out
+
+
+# -- Reference -----------------------------------------------------------------------------------
+def stored_reference(name: str, resolution) -> dict | None:
+    path = STORED_REFERENCES / f"{name}.npz"
+    if tuple(resolution) != STORED_RESOLUTION or not path.is_file():
+        return None
+    data = np.load(path)
+    image = data["image"].astype(np.float64)
+    if image.shape[:2] != (resolution[1], resolution[0]):
+        return None
+    settings = json.loads(str(data["settings"]))
+    grid = tuple(int(v) for v in data["grid"])
+    npix = (image.shape[0] // grid[0]) * (image.shape[1] // grid[1])
+    # region_se_pixels = sqrt(block mean of the mean pixel's variance) / sqrt(npix)
+    ref_var = float(np.mean(data["region_se_pixels"] ** 2 * npix))
+    seeds = settings.get("seeds", [])
+    return {"image": image, "variance": ref_var,
+            "source": f"stored {path.relative_to(REPO)}: Cycles {len(seeds)} seeds x "
+                      f"{settings.get('samples')} spp",
+            "samples": int(settings.get("samples", 0)) * max(1, len(seeds)),
+            "seconds": None}
+
+
+def rendered_reference(name, bscene, resolution, samples, configure, render_exr, tmpdir) -> dict:
+    w, h = resolution
+    path = CACHE_DIR / f"{name}_{w}x{h}_{samples}.npz"
+    if path.is_file():
+        data = np.load(path)
+        return {"image": data["image"].astype(np.float64), "variance": float(data["variance"]),
+                "source": f"cached {path}: Cycles {len(REFERENCE_SEEDS)} seeds x "
+                          f"{samples // len(REFERENCE_SEEDS)} spp", "samples": samples,
+                "seconds": None}
+    per_seed = max(1, samples // len(REFERENCE_SEEDS))
+    renders, seconds = [], 0.0
+    for seed in REFERENCE_SEEDS:
+        _log(f"  reference: Cycles {per_seed} spp, seed {seed} ...")
+        configure(bscene, per_seed, seed, gi=True)
+        img, dt = render_exr(bscene, os.path.join(tmpdir, f"ref_{name}_{seed}.exr"))
+        renders.append(img)
+        seconds += dt
+    a, b = renders
+    image = (a + b) / 2
+    ref_var = float(np.mean((a - b) ** 2) / 4)     # variance of the 2-seed mean, per pixel
+    CACHE_DIR.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.stem + ".tmp.npz")
+    np.savez_compressed(tmp, image=image.astype(np.float32), variance=ref_var,
+                        seeds=np.array(REFERENCE_SEEDS), samples_per_seed=per_seed,
+                        seconds=seconds)
+    os.replace(tmp, path)
+    return {"image": image, "variance": ref_var,
+            "source": f"rendered now, cached as {path}: Cycles {len(REFERENCE_SEEDS)} seeds x "
+                      f"{per_seed} spp", "samples": samples, "seconds": seconds}
+
+
+# -- One scene -----------------------------------------------------------------------------------
+def bench_scene(name, resolution, cycles_samples, reference_samples, cycles, tmpdir,
+                warm: dict) -> dict:
+    import bpy
+
+    from . import seed_scenes
+    from .export import export_scene
+    from ..pipeline import RenderSettings, render
+    from ..scene import SceneError
+
+    configure, render_exr, _source = cycles
+    w, h = resolution
+    try:
+        bscene = seed_scenes.build(name)
+        bscene.render.resolution_x, bscene.render.resolution_y = w, h
+        bscene.render.resolution_percentage = 100
+        bpy.context.view_layer.update()
+    except Exception as exc:  # noqa: BLE001 - reported as one line
+        raise BenchError(f"scene {name!r} cannot be built: {' '.join(str(exc).split())}") from None
+
+    out = {"scene": name, "resolution": [w, h], "rows": [], "failures": []}
+    # Lanterna
+    _log(f"{name}: Lanterna, preset final ...")
+    try:
+        t0 = time.perf_counter()
+        scene = export_scene(bpy.context.evaluated_depsgraph_get())
+        export_seconds = time.perf_counter() - t0
+        settings = RenderSettings(preset="final", seed=LANTERNA_SEED)
+        t0 = time.perf_counter()
+        result = render(scene, settings)
+        seconds = time.perf_counter() - t0
+    except SceneError as exc:
+        raise BenchError(f"scene {name!r}: Lanterna cannot render it: "
+                         f"{' '.join(str(exc).split())}") from None
+    rep = result.report
+    images = {("lanterna", None, False): np.asarray(result.image, np.float64)}
+    out["rows"].append({
+        "method": "Lanterna", "preset": "final", "samples": rep["settings"]["samples"],
+        "denoiser": False, "seconds": seconds, "export_seconds": export_seconds,
+        "stages": {k: v["seconds"] for k, v in rep["stages"].items()},
+        "settings": rep["settings"], "warnings": rep.get("warnings", []),
+        "peak_memory_mb": rep.get("peak_memory_mb")})
+
+    # Cycles
+    if not warm.get("done"):
+        configure(bscene, 1, CYCLES_SEED, gi=True)
+        try:
+            render_exr(bscene, os.path.join(tmpdir, "warm.exr"))
+        except Exception:  # noqa: BLE001 - the real renders below report the failure
+            pass
+        warm["done"] = True
+    for spp in cycles_samples:
+        for denoise in (False, True):
+            label = f"Cycles {spp} spp{' + OIDN' if denoise else ''}"
+            _log(f"{name}: {label} ...")
+            configure(bscene, spp, CYCLES_SEED, gi=True)
+            row = {"method": "Cycles", "samples": spp, "denoiser": denoise, "seed": CYCLES_SEED,
+                   "threads": bscene.render.threads}
+            if denoise:
+                row["denoiser_settings"] = set_denoiser(bscene)
+            try:
+                img, dt = render_exr(bscene, os.path.join(tmpdir, f"{name}_{spp}_{int(denoise)}.exr"))
+            except Exception as exc:  # noqa: BLE001
+                msg = f"{name}: {label} failed: {' '.join(str(exc).split())}"
+                print(f"lanterna bench: error: {msg}", file=sys.stderr)
+                out["failures"].append(msg)
+                continue
+            if img.shape[:2] != (h, w):
+                out["failures"].append(f"{name}: {label}: image {img.shape[1]}x{img.shape[0]}")
+                continue
+            row["seconds"] = dt
+            if denoise and ("cycles", spp, False) in images:
+                row["denoiser_changed_image"] = bool(
+                    np.abs(img - images[("cycles", spp, False)]).max() > 0)
+            images[("cycles", spp, denoise)] = img
+            out["rows"].append(row)
+    out["cycles_settings"] = {k: v for k, v in configure(bscene, 1, CYCLES_SEED, gi=True).items()
+                              if k not in ("samples", "seed")}
+
+    # Reference and errors
+    ref = stored_reference(name, resolution)
+    if ref is None:
+        ref = rendered_reference(name, bscene, resolution, reference_samples, configure,
+                                 render_exr, tmpdir)
+    ref_image = ref["image"]
+    mean_ref = float(ref_image.mean())
+    out["reference"] = {"source": ref["source"], "samples": ref["samples"],
+                        "seconds": ref["seconds"], "mean": mean_ref,
+                        "pixel_variance": ref["variance"],
+                        "rel_rms_noise": math.sqrt(ref["variance"]) / mean_ref}
+    for row in out["rows"]:
+        key = (("lanterna", None, False) if row["method"] == "Lanterna"
+               else ("cycles", row["samples"], row["denoiser"]))
+        row.update(errors(images[key], ref_image, ref["variance"]))
+    # Cross-check of the reference noise: Cycles' MSE = V / spp + v at 64 and 256 spp.
+    by = {(r["samples"], r["denoiser"]): r for r in out["rows"] if r["method"] == "Cycles"}
+    if (64, False) in by and (256, False) in by:
+        m64, m256 = by[(64, False)]["mse"], by[(256, False)]["mse"]
+        v_fit = (m256 * 256 - m64 * 64) / (256 - 64)
+        out["reference"]["pixel_variance_fit_from_cycles"] = v_fit
+        out["reference"]["rel_rms_noise_fit_from_cycles"] = (
+            math.sqrt(v_fit) / mean_ref if v_fit > 0 else 0.0)
+
+    # The issue's checks
+    lan = out["rows"][0]
+    c256 = by.get((CHECK_SAMPLES, False))
+    if c256 is None:
+        out["checks"] = {"skipped": f"no Cycles {CHECK_SAMPLES} spp render without denoiser"}
+    else:
+        checks = {
+            "rmse_ratio": lan["rel_rmse"] / c256["rel_rmse"],
+            "rmse_ok": lan["rel_rmse"] <= c256["rel_rmse"],
+            "time_ratio": lan["seconds"] / c256["seconds"],
+        }
+        checks["time_ok"] = checks["time_ratio"] <= TIME_FRACTION
+        if c256.get("rel_rmse_corrected"):
+            checks["rmse_ratio_corrected"] = lan["rel_rmse_corrected"] / c256["rel_rmse_corrected"]
+        out["checks"] = checks
+    return out
+
+
+# -- Printing ------------------------------------------------------------------------------------
+def _pct(x) -> str:
+    return "-" if x is None else f"{100 * x:6.2f} %"
+
+
+def print_scene(out: dict) -> None:
+    w, h = out["resolution"]
+    ref = out["reference"]
+    print(f"\n{SCENE_TITLES.get(out['scene'], out['scene'])} ({out['scene']}) at {w}x{h}")
+    print(f"  reference: {ref['source']}; its noise: RMS {_pct(ref['rel_rms_noise']).strip()} of"
+          f" the mean" + (f" (fit from Cycles 64/256: {_pct(ref['rel_rms_noise_fit_from_cycles']).strip()})"
+                           if "rel_rms_noise_fit_from_cycles" in ref else ""))
+    if out["scene"] == "scene2" and ref["source"].startswith("stored"):
+        print("  note: Scene 2's stored reference is noisy (worst 4x4 block SE 2 %, "
+              "tests/data/README.md); read the corrected column")
+    print(f"  {'method':9s} {'samples':>8s} {'denoiser':>8s} {'seconds':>8s} {'rel RMSE':>9s}"
+          f" {'corrected':>9s} {'worst block':>11s}")
+    for r in out["rows"]:
+        samples = f"final/{r['samples']}" if r["method"] == "Lanterna" else str(r["samples"])
+        den = "OIDN" if r["denoiser"] else "off"
+        if r["method"] == "Lanterna":
+            den = "-"
+        print(f"  {r['method']:9s} {samples:>8s} {den:>8s} {r['seconds']:8.2f} "
+              f"{_pct(r.get('rel_rmse')):>9s} {_pct(r.get('rel_rmse_corrected')):>9s} "
+              f"{_pct(r.get('worst_block')):>11s}")
+        if r.get("denoiser") and r.get("denoiser_changed_image") is False:
+            print("    ^ the denoiser left the image unchanged: OIDN did not run")
+    lan = out["rows"][0]
+    print("  Lanterna stages [s]: " + ", ".join(
+        f"{k} {v:.2f}" for k, v in lan["stages"].items() if v >= 0.005)
+        + f"; export {lan['export_seconds']:.2f} s (not counted)")
+    c = out["checks"]
+    if "skipped" in c:
+        print(f"  checks skipped: {c['skipped']}")
+        return
+    corr = (f", corrected {c['rmse_ratio_corrected']:.2f}" if "rmse_ratio_corrected" in c else "")
+    print(f"  check 1: Lanterna RMSE <= Cycles-{CHECK_SAMPLES} RMSE: ratio {c['rmse_ratio']:.2f}"
+          f"{corr} -> {'PASS' if c['rmse_ok'] else 'FAIL'}")
+    print(f"  check 2: Lanterna time <= 1/4 of Cycles-{CHECK_SAMPLES}'s: ratio {c['time_ratio']:.3f}"
+          f" (need <= {TIME_FRACTION}) -> {'PASS' if c['time_ok'] else 'FAIL'}")
+
+
+# -- Command line --------------------------------------------------------------------------------
+def _resolution(text: str):
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise BenchError(f"--resolution must look like 160x120, got {text!r}") from None
+    if w < GRID[1] or h < GRID[0] or w % GRID[1] or h % GRID[0]:
+        raise BenchError(f"--resolution {w}x{h}: width and height must be multiples of "
+                         f"{GRID[1]} and {GRID[0]} (the 4 x 4 block grid)")
+    return w, h
+
+
+def _int_list(text: str, flag: str):
+    try:
+        values = [int(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise BenchError(f"{flag} must be a comma-separated list of integers, got {text!r}") from None
+    if not values or min(values) < 1:
+        raise BenchError(f"{flag} must list integers >= 1, got {text!r}")
+    return values
+
+
+def parse_args(argv):
+    parser = _Parser(prog=PROG, description=__doc__.split("\n\n")[0])
+    parser.add_argument("--resolution", default="x".join(map(str, DEFAULT_RESOLUTION)))
+    parser.add_argument("--scenes", default=",".join(DEFAULT_SCENES))
+    parser.add_argument("--cycles-samples", default=",".join(map(str, DEFAULT_CYCLES_SAMPLES)))
+    parser.add_argument("--reference-samples", default=str(DEFAULT_REFERENCE_SAMPLES))
+    parser.add_argument("--json", default=None)
+    args = parser.parse_args(argv)
+    args.resolution = _resolution(args.resolution)
+    args.scenes = [s.strip() for s in args.scenes.split(",") if s.strip()]
+    if not args.scenes:
+        raise BenchError("--scenes is empty")
+    args.cycles_samples = _int_list(args.cycles_samples, "--cycles-samples")
+    ref = _int_list(args.reference_samples, "--reference-samples")
+    if len(ref) != 1 or ref[0] < 2:
+        raise BenchError("--reference-samples must be one integer >= 2")
+    args.reference_samples = ref[0]
+    return args
+
+
+def run(args) -> tuple[dict, int]:
+    try:
+        import bpy  # noqa: F401
+        import OpenEXR  # noqa: F401
+    except ImportError as exc:
+        raise BenchError(f"needs bpy and OpenEXR: {exc}") from None
+    if args.json:
+        parent = os.path.dirname(os.path.abspath(args.json))
+        if not os.path.isdir(parent):
+            raise BenchError(f"--json {args.json}: directory {parent} does not exist")
+    cycles = cycles_functions()
+    results = {"resolution": list(args.resolution), "cycles_samples": args.cycles_samples,
+               "cycles_settings_source": cycles[2], "oidn_in_build": oidn_available(),
+               "definitions": {
+                   "rel_rmse": "sqrt(mean((img - ref)^2)) / mean(ref), all pixels and channels",
+                   "rel_rmse_corrected": "sqrt(max(MSE - v, 0)) / mean(ref), v = reference's "
+                                         "per-pixel noise variance",
+                   "worst_block": "max over 4x4 blocks of |mean(img)/mean(ref) - 1|, means over "
+                                  "the block's pixels and channels",
+                   "seconds": "wall time of pipeline.render (Lanterna) / "
+                              "bpy.ops.render.render(write_still=True) (Cycles)"},
+               "scenes": {}, "errors": []}
+    print(f"Lanterna (preset final) vs Cycles (CPU, {cycles[2]}) at "
+          f"{args.resolution[0]}x{args.resolution[1]}; OIDN in this bpy: "
+          f"{'yes' if results['oidn_in_build'] else 'NO'}")
+    print("rel RMSE = sqrt(mean((img - ref)^2)) / mean(ref) over all pixels and channels;"
+          " corrected = with the reference's own noise variance taken out;"
+          " worst block = max |block mean / reference - 1| over 4x4 blocks")
+    status = 0
+    with tempfile.TemporaryDirectory(prefix="lanterna_vs_cycles_") as tmpdir:
+        warm: dict = {}
+        for name in args.scenes:
+            try:
+                out = bench_scene(name, args.resolution, args.cycles_samples,
+                                  args.reference_samples, cycles, tmpdir, warm)
+            except BenchError as exc:
+                print(f"lanterna bench: error: {exc}", file=sys.stderr)
+                results["errors"].append(str(exc))
+                status = 2
+                continue
+            results["scenes"][name] = out
+            results["errors"].extend(out["failures"])
+            if out["failures"]:
+                status = 2
+            print_scene(out)
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump(results, fh, indent=2)
+        print(f"\nwrote {args.json}")
+    return results, status
+
+
+def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        args = parse_args(argv)
+        _results, status = run(args)
+        return status
+    except BenchError as exc:
+        print(f"lanterna bench: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("lanterna bench: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
