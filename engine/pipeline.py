@@ -593,6 +593,22 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
         photon_seconds = time.perf_counter() - t0
         radius = settings.photon_radius or auto_max_radius(scene, len(pmap), settings.photon_k)
         lookups = settings.photon_lookups or auto_lookups(pixel_count, settings.samples)
+        s = pmap.stats
+        stage("photons", photon_seconds, requested=s["requested"], emitted=s["emitted"],
+              stored=s["stored"], stored_all=s["stored_all"], kept=s["kept"],
+              photons_per_light=s["photons_per_light"], photon_rays=s.get("rays", 0),
+              flux_emitted=s["flux_emitted"], flux_absorbed=s.get("flux_absorbed", [0, 0, 0]),
+              flux_escaped=s.get("flux_escaped", [0, 0, 0]),
+              flux_capped=s.get("flux_capped", [0, 0, 0]), capped_paths=s.get("capped_paths", 0),
+              flux_stored_direct=s["flux_stored_direct"],
+              flux_stored_indirect=s["flux_stored_indirect"],
+              map_bytes=s["bytes"], bytes_per_photon=s["bytes_per_photon"],
+              kd_tree=s.get("library"), emit_seconds=round(s["emit_seconds"], 6),
+              trace_seconds=round(s["trace_seconds"], 6),
+              build_seconds=round(s.get("build_seconds", 0.0), 6),
+              k=settings.photon_k, max_radius_m=radius, radius_automatic=not settings.photon_radius,
+              filter=settings.photon_filter, max_bounces=settings.bounces,
+              lookups_per_pixel=lookups)
         cone = CONE_FILTER_K if settings.photon_filter == "cone" else None
         if not plan["final_gather"]:
             photon = _PhotonEstimate(pmap, settings.photon_k, radius,
@@ -617,22 +633,6 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
                       gather=f"{settings.gather_m}x{settings.gather_n}")
                 photon = _CachedIndirect(cache, settings.cache_error, photon, lookups,
                                          settings.cache_gradients)
-        s = pmap.stats
-        stage("photons", photon_seconds, requested=s["requested"], emitted=s["emitted"],
-              stored=s["stored"], stored_all=s["stored_all"], kept=s["kept"],
-              photons_per_light=s["photons_per_light"], photon_rays=s.get("rays", 0),
-              flux_emitted=s["flux_emitted"], flux_absorbed=s.get("flux_absorbed", [0, 0, 0]),
-              flux_escaped=s.get("flux_escaped", [0, 0, 0]),
-              flux_capped=s.get("flux_capped", [0, 0, 0]), capped_paths=s.get("capped_paths", 0),
-              flux_stored_direct=s["flux_stored_direct"],
-              flux_stored_indirect=s["flux_stored_indirect"],
-              map_bytes=s["bytes"], bytes_per_photon=s["bytes_per_photon"],
-              kd_tree=s.get("library"), emit_seconds=round(s["emit_seconds"], 6),
-              trace_seconds=round(s["trace_seconds"], 6),
-              build_seconds=round(s.get("build_seconds", 0.0), 6),
-              k=settings.photon_k, max_radius_m=radius, radius_automatic=not settings.photon_radius,
-              filter=settings.photon_filter, max_bounces=settings.bounces,
-              lookups_per_pixel=lookups)
         for light in scene.lights:
             if getattr(light, "photon_share", 1.0) == 0:
                 report["warnings"].append(f"Light '{light.name}': photon share 0, so it sends "

@@ -224,7 +224,14 @@ def print_photons(out: dict) -> None:
 
 
 def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if "--vs-cycles" in argv:  # issue 4: the final preset against Cycles (bench_cycles.py)
+        from .bench_cycles import main as vs_cycles_main
+        return vs_cycles_main([a for a in argv if a != "--vs-cycles"])
     parser = argparse.ArgumentParser(prog="lanterna bench", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--vs-cycles", action="store_true",
+                        help="Lanterna's final preset against Cycles on the seed's scenes; "
+                             "see engine/blender/bench_cycles.py (--vs-cycles --help)")
     parser.add_argument("--resolution", default="640x480")
     parser.add_argument("--samples", type=int, default=16)
     parser.add_argument("--threads", type=int, default=0)

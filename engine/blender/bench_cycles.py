@@ -58,6 +58,7 @@ exported, a failed Cycles render, a bad flag) print one ``lanterna bench: error:
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib.util
 import json
 import math
@@ -98,6 +99,25 @@ class _Parser(argparse.ArgumentParser):
 
 def _log(text: str) -> None:
     print(text, file=sys.stderr, flush=True)
+
+
+@contextlib.contextmanager
+def _blender_output_to(path: str):
+    """Send what Blender writes to the process's stdout and stderr ("Saved: ..." lines) to
+    ``path`` while a render runs; Python exceptions still carry the error."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    with open(path, "ab") as log:
+        os.dup2(log.fileno(), 1)
+        os.dup2(log.fileno(), 2)
+        try:
+            yield
+        finally:
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            for fd in saved:
+                os.close(fd)
 
 
 # -- Cycles --------------------------------------------------------------------------------------
@@ -258,7 +278,8 @@ def rendered_reference(name, bscene, resolution, samples, configure, render_exr,
     for seed in REFERENCE_SEEDS:
         _log(f"  reference: Cycles {per_seed} spp, seed {seed} ...")
         configure(bscene, per_seed, seed, gi=True)
-        img, dt = render_exr(bscene, os.path.join(tmpdir, f"ref_{name}_{seed}.exr"))
+        with _blender_output_to(os.path.join(tmpdir, "blender.log")):
+            img, dt = render_exr(bscene, os.path.join(tmpdir, f"ref_{name}_{seed}.exr"))
         renders.append(img)
         seconds += dt
     a, b = renders
@@ -322,7 +343,8 @@ def bench_scene(name, resolution, cycles_samples, reference_samples, cycles, tmp
     if not warm.get("done"):
         configure(bscene, 1, CYCLES_SEED, gi=True)
         try:
-            render_exr(bscene, os.path.join(tmpdir, "warm.exr"))
+            with _blender_output_to(os.path.join(tmpdir, "blender.log")):
+                render_exr(bscene, os.path.join(tmpdir, "warm.exr"))
         except Exception:  # noqa: BLE001 - the real renders below report the failure
             pass
         warm["done"] = True
@@ -334,9 +356,11 @@ def bench_scene(name, resolution, cycles_samples, reference_samples, cycles, tmp
             row = {"method": "Cycles", "samples": spp, "denoiser": denoise, "seed": CYCLES_SEED,
                    "threads": bscene.render.threads}
             if denoise:
-                row["denoiser_settings"] = set_denoiser(bscene)
+                with _blender_output_to(os.path.join(tmpdir, "blender.log")):
+                    row["denoiser_settings"] = set_denoiser(bscene)
             try:
-                img, dt = render_exr(bscene, os.path.join(tmpdir, f"{name}_{spp}_{int(denoise)}.exr"))
+                with _blender_output_to(os.path.join(tmpdir, "blender.log")):
+                    img, dt = render_exr(bscene, os.path.join(tmpdir, f"{name}_{spp}_{int(denoise)}.exr"))
             except Exception as exc:  # noqa: BLE001
                 msg = f"{name}: {label} failed: {' '.join(str(exc).split())}"
                 print(f"lanterna bench: error: {msg}", file=sys.stderr)
