@@ -45,19 +45,8 @@ import numpy as np
 from . import sampling
 
 LOOKUP_NEIGHBOURS = 4       # nearest estimates inspected for one with an agreeing normal
-
-
-def gather_directions(count: int, m: int, n: int, rng: np.random.Generator) -> np.ndarray:
-    """Local directions (count, M, N, 3) about +z: one jittered sample per (theta, phi)
-    stratum of the cosine-weighted hemisphere (Eq. 8.4-8.6)."""
-    u = rng.random((count, m, n, 2))
-    j = np.arange(m)[None, :, None]
-    k = np.arange(n)[None, None, :]
-    sin2 = (j + u[..., 0]) / m                      # sin^2(theta) stratified: cosine weighting
-    sin_t = np.sqrt(sin2)
-    cos_t = np.sqrt(np.maximum(0.0, 1.0 - sin2))
-    phi = 2.0 * np.pi * (k + u[..., 1]) / n
-    return np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t], axis=-1)
+GUIDE_PHOTONS = 128         # nearby photons whose directions steer a guided gather
+LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 
 @dataclass
@@ -126,28 +115,85 @@ class RadianceEstimates:
         return out
 
 
+def photon_guided_allocation(points, normals, photon_map, m, n, extra, k=GUIDE_PHOTONS,
+                             rng=None):
+    """Rays per stratum (P, M*N) int: 1 everywhere plus ``extra`` rays a point shared among its
+    strata in proportion to the flux of the nearby photons that arrived through them
+    (Jensen 1995, "Importance driven path tracing using the photon map"). Only photons that
+    bounced at least once count (direct light is computed exactly elsewhere). The allocation
+    is fixed before any ray is traced and each stratum's radiance is the mean of its rays, so
+    the estimate stays unbiased; bright small patches (a lamp's lit surroundings) get the
+    rays that a uniform gather would spend elsewhere."""
+    count, cells = len(points), m * n
+    alloc = np.ones((count, cells), np.int64)
+    if photon_map is None or len(photon_map) == 0 or extra <= 0 or count == 0:
+        return alloc
+    kk = int(min(k, len(photon_map)))
+    _dist, idx = photon_map.query(np.ascontiguousarray(points, np.float32), kk)
+    found = idx < len(photon_map)
+    flat = np.where(found, idx, 0).reshape(-1)
+    nrm = normals.astype(np.float32)
+    inc = np.take(photon_map.incoming, flat, axis=0).astype(np.float32).reshape(count, kk, 3)
+    pn = np.take(photon_map.normals, flat, axis=0).astype(np.float32).reshape(count, kk, 3)
+    towards = -inc                                                     # to where light came from
+    t, b = sampling.orthonormal_basis(normals.astype(np.float64))
+    cos_t = np.einsum("pkj,pj->pk", towards, nrm)
+    keep = found & (cos_t > 0) & (np.einsum("pkj,pj->pk", pn, nrm) > 0.5)
+    keep &= np.take(photon_map.bounces, flat).reshape(count, kk) >= 1
+    x = np.einsum("pkj,pj->pk", towards, t.astype(np.float32))
+    y = np.einsum("pkj,pj->pk", towards, b.astype(np.float32))
+    sin2 = np.clip(1.0 - cos_t * cos_t, 0.0, 1.0 - 1e-9)
+    j = np.minimum((sin2 * m).astype(np.int64), m - 1)
+    phi = np.mod(np.arctan2(y, x), 2 * np.pi)
+    kk_ = np.minimum((phi * (n / (2 * np.pi))).astype(np.int64), n - 1)
+    weight = np.take(photon_map.power, flat, axis=0).astype(np.float64).reshape(count, kk, 3) @ LUMA
+    weight *= keep
+    key = (np.arange(count)[:, None] * cells + j * n + kk_).reshape(-1)
+    hist = np.bincount(key, weights=weight.reshape(-1), minlength=count * cells).reshape(count, cells)
+    total = hist.sum(axis=1, keepdims=True)
+    share = np.divide(hist, total, out=np.zeros_like(hist), where=total > 0) * extra
+    u = (rng or np.random.default_rng(0)).random(share.shape)
+    alloc += np.floor(share + u).astype(np.int64)                       # randomised rounding
+    return alloc
+
+
 def final_gather(points: np.ndarray, normals: np.ndarray, offset_normals: np.ndarray,
                  estimates: RadianceEstimates, accel, arrays, rng: np.random.Generator,
-                 m: int = 8, n: int = 32, max_specular: int = 4, stats: dict | None = None):
+                 m: int = 8, n: int = 32, max_specular: int = 4, stats: dict | None = None,
+                 guide=None, guide_extra: float = 1.0):
     """Indirect irradiance at ``points`` (P, 3) with unit ``normals`` (facing the viewer) by the
     stratified final gather. ``offset_normals``: geometric normals for the ray offset.
     ``arrays``: the pipeline's per-material tables (``diffuse_over_pi``, ``specular``,
-    ``is_specular``, ``material_ids``, ``geometric_normals``).
+    ``is_specular``, ``material_ids``, ``geometric_normals``). ``guide``: a photon map whose
+    nearby photons steer ``guide_extra`` x M x N extra rays into the strata their light came
+    through (``photon_guided_allocation``); None: one ray per stratum.
 
-    Returns (E (P, 3), L (P, M, N, 3), r (P, M, N)): irradiance, per-stratum radiance and hit
-    distance (inf for a miss)."""
+    Returns (E (P, 3), L (P, M, N, 3), r (P, M, N)): irradiance, per-stratum radiance (the
+    mean of its rays) and hit distance of its first ray (inf for a miss)."""
     count = len(points)
-    local = gather_directions(count, m, n, rng).reshape(count, m * n, 3)
+    cells = m * n
+    alloc = photon_guided_allocation(points, normals, guide, m, n, guide_extra * cells, rng=rng) \
+        if guide is not None else np.ones((count, cells), np.int64)
+    stratum = np.repeat(np.arange(count * cells), alloc.reshape(-1))      # stratum of each ray
+    first = np.concatenate([[0], np.cumsum(alloc.reshape(-1))[:-1]])      # its first ray
+    point_of = stratum // cells
+    j, k = (stratum % cells) // n, stratum % n
+    u = rng.random((len(stratum), 2))
+    sin2 = (j + u[:, 0]) / m
+    sin_t = np.sqrt(sin2)
+    cos_t = np.sqrt(np.maximum(0.0, 1.0 - sin2))
+    phi = 2.0 * np.pi * (k + u[:, 1]) / n
+    lx, ly = sin_t * np.cos(phi), sin_t * np.sin(phi)
     t, b = sampling.orthonormal_basis(normals.astype(np.float64))
     nn = normals.astype(np.float64)
-    dirs = (local[..., 0:1] * t[:, None] + local[..., 1:2] * b[:, None]
-            + local[..., 2:3] * nn[:, None]).reshape(-1, 3)
-    origin_points = np.repeat(points.astype(np.float64), m * n, axis=0)
-    origin_normals = np.repeat(offset_normals.astype(np.float64), m * n, axis=0)
-    radiance = np.zeros((count * m * n, 3))
-    distance = np.full(count * m * n, np.inf)
+    dirs = (lx[:, None] * t[point_of] + ly[:, None] * b[point_of] + cos_t[:, None] * nn[point_of])
+    origin_points = points.astype(np.float64)[point_of]
+    origin_normals = offset_normals.astype(np.float64)[point_of]
+    total_rays = len(stratum)
+    radiance = np.zeros((total_rays, 3))
+    distance = np.full(total_rays, np.inf)
     origins = accel.offset_origins(origin_points, origin_normals, dirs)
-    ray_of = np.arange(count * m * n)
+    ray_of = np.arange(total_rays)
     throughput = None
     rays = 0
     t0 = time.perf_counter()
@@ -191,6 +237,10 @@ def final_gather(points: np.ndarray, normals: np.ndarray, offset_normals: np.nda
         stats["gather_rays"] = stats.get("gather_rays", 0) + rays
         stats["gather_points"] = stats.get("gather_points", 0) + count
         stats["gather_seconds"] = stats.get("gather_seconds", 0.0) + time.perf_counter() - t0
-    radiance = radiance.reshape(count, m, n, 3)
-    irradiance = np.pi / (m * n) * radiance.sum(axis=(1, 2))
-    return irradiance, radiance, distance.reshape(count, m, n)
+    per_stratum = np.zeros((count * cells, 3))
+    for c in range(3):
+        per_stratum[:, c] = np.bincount(stratum, weights=radiance[:, c], minlength=count * cells)
+    per_stratum /= alloc.reshape(-1, 1)
+    per_stratum = per_stratum.reshape(count, m, n, 3)
+    irradiance = np.pi / cells * per_stratum.sum(axis=(1, 2))
+    return irradiance, per_stratum, distance[first].reshape(count, m, n)

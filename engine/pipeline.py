@@ -55,6 +55,8 @@ Settings (``RenderSettings``)
     gather_m, gather_n     8, 32     final gather strata in theta and phi (M x N rays)
     cache_error            0.2       irradiance cache error a: records serve where w > 1/a
     cache_gradients        True      interpolate with the records' gradients (Eq. 10.5)
+    gather_guided          1.0       extra gather rays, as a multiple of M x N, steered by the
+                                     nearby photons' directions (Jensen 1995); 0 = off
     shadow_photons         True      lit / penumbra / umbra classes from shadow photons
     force                  ""        comma-separated stages to run although the plan skips
                                      them (checks that a skip changes nothing)
@@ -124,6 +126,7 @@ class RenderSettings:
     gather_n: int = 32
     cache_error: float = 0.2
     cache_gradients: bool = True
+    gather_guided: float = 1.0
     shadow_photons: bool = True
     force: str = ""
     preset: str = "custom"
@@ -149,7 +152,8 @@ class RenderSettings:
                   ("photon_lookups", self.photon_lookups >= 0),
                   ("indirect", self.indirect in INDIRECT_METHODS),
                   ("gather_m", 1 <= self.gather_m <= 256), ("gather_n", 1 <= self.gather_n <= 1024),
-                  ("cache_error", np.isfinite(self.cache_error) and 0.01 <= self.cache_error <= 10)]
+                  ("cache_error", np.isfinite(self.cache_error) and 0.01 <= self.cache_error <= 10),
+                  ("gather_guided", np.isfinite(self.gather_guided) and 0 <= self.gather_guided <= 64)]
         for name, ok in checks:
             if not ok:
                 allowed = {"mode": f" (one of {', '.join(MODES)})",
@@ -311,8 +315,7 @@ def _cache_prepass(scene, accel, arrays, gather: _FinalGather, settings, pool, t
             def record(part, number):
                 prng = sampling.rng_for(settings.seed, sampling.STREAM_GATHER,
                                         (pass_index << 16) + number)
-                e, radiance, dist = final_gather(x[part], ns[part], ng[part], gather.estimates,
-                                                 accel, arrays, prng, gather.m, gather.n)
+                e, radiance, dist = gather.gather(x[part], ns[part], ng[part], prng)
                 frames = sampling.orthonormal_basis(ns[part].astype(np.float64)) + (ns[part].astype(np.float64),)
                 g = irradiance_and_gradients(radiance, dist, gather.m, gather.n, frames)
                 raw = _record_radius(dist)
@@ -387,14 +390,19 @@ class _PhotonEstimate:
 class _FinalGather:
     """Indirect light by the stratified final gather at every asking sample (no cache)."""
 
-    def __init__(self, estimates, accel, arrays, m, n, lookups):
+    def __init__(self, estimates, accel, arrays, m, n, lookups, guide=None, guide_extra=0.0):
         self.estimates, self.accel, self.arrays = estimates, accel, arrays
         self.m, self.n, self.lookups = m, n, lookups
+        self.guide, self.guide_extra = guide, guide_extra
+
+    def gather(self, x, ns, ng, rng, stats=None):
+        return final_gather(x, ns, ng, self.estimates, self.accel, self.arrays, rng, self.m,
+                            self.n, stats=stats,
+                            guide=self.guide if self.guide_extra > 0 else None,
+                            guide_extra=self.guide_extra)
 
     def irradiance(self, x, ns, ng, rng, stats):
-        e, _radiance, _dist = final_gather(x, ns, ng, self.estimates, self.accel, self.arrays,
-                                           rng, self.m, self.n, stats=stats)
-        return e
+        return self.gather(x, ns, ng, rng, stats)[0]
 
 
 def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArrays,
@@ -620,7 +628,7 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
             stage("radiance_estimates", estimates.stats["seconds"],
                   estimates=estimates.stats["estimates"], bytes=estimates.stats.get("bytes", 0))
             photon = _FinalGather(estimates, accel, arrays, settings.gather_m, settings.gather_n,
-                                  lookups)
+                                  lookups, pmap, settings.gather_guided)
             if plan["irradiance_cache"]:
                 t0 = time.perf_counter()
                 cache, cache_stats = _cache_prepass(scene, accel, arrays, photon, settings, pool,
