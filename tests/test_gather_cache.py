@@ -83,3 +83,33 @@ def test_thin_plate_lit_from_both_sides_keeps_its_sides_apart():
         np.testing.assert_allclose(c, g, rtol=0.03)
         top = eye[2] > 1.5
         assert (c[0] > 5 * c[2]) if top else (c[2] > 5 * c[0])
+
+
+def test_photon_guided_gather_is_unbiased_and_less_noisy():
+    """Steering extra rays by the photons' directions (Jensen 1995) keeps the estimate's mean
+    (it only changes how many rays each stratum gets) and spreads less than a plain gather
+    with as many rays: per-point indirect irradiance on the room's back wall, 64 points x 40
+    repeats; guided 4 x 16 + 64 extra rays against plain 4 x 16 and 4 x 32. Measured spread
+    (mean per-point SD): plain 4 x 16 0.117, plain 4 x 32 0.075, guided 0.065."""
+    from lanterna.engine import pipeline as P
+    from lanterna.engine.accel import Accelerator
+    from lanterna.engine.gather import RadianceEstimates, final_gather
+    from lanterna.engine.photons import auto_max_radius, build_photon_map
+
+    scene = _room().validate()
+    accel = Accelerator(scene.triangles, threads=1)
+    pmap = build_photon_map(scene, accel, 200_000, seed=5)
+    estimates = RadianceEstimates.build(pmap, k=50, max_radius=auto_max_radius(scene, len(pmap), 50))
+    arrays = P._SceneArrays(scene)
+    points = np.column_stack([np.linspace(0.5, 3.5, 64), np.full(64, 3.99), np.linspace(0.3, 2.7, 64)])
+    normals = np.tile([0.0, -1.0, 0.0], (64, 1))                # the back wall, facing the room
+
+    def repeat(guide, extra, n=16):
+        rng = np.random.default_rng(7)
+        return np.stack([final_gather(points, normals, normals, estimates, accel, arrays, rng, 4, n,
+                                      guide=guide, guide_extra=extra)[0][:, 1] for _ in range(40)])
+
+    plain, guided, same_rays = repeat(None, 0.0), repeat(pmap, 1.0), repeat(None, 0.0, 32)
+    se = np.sqrt(plain.var(axis=0, ddof=1) / 40 + guided.var(axis=0, ddof=1) / 40).mean()
+    assert abs(guided.mean() - plain.mean()) <= 4 * se / np.sqrt(64)
+    assert guided.std(axis=0).mean() < same_rays.std(axis=0).mean() < plain.std(axis=0).mean()
