@@ -178,6 +178,28 @@ def test_photon_flags_reach_the_pipeline(tmp_path, capfd):
     assert imageio.read_exr_rgb(exr).max() > 0.01
 
 
+def test_preset_and_indirect_flags(tmp_path, capfd):
+    exr, report = tmp_path / "q.exr", tmp_path / "q.json"
+    code = cli.main(["render", "--resolution", "32x24", "--preset", "preview", "--gather", "3x7",
+                     "--cache-error", "0.4", "--no-shadow-photons", "-o", str(exr),
+                     "--report", str(report), "--quiet"])
+    err = capfd.readouterr().err
+    assert code == 0, err
+    assert "the preview preset sets --gather, --cache-error; those flags are ignored" in err
+    data = json.loads(report.read_text())
+    s = data["settings"]                         # as rendered: the preset's values
+    assert s["preset"] == "preview" and (s["gather_m"], s["gather_n"]) == (6, 24)
+    assert s["cache_error"] == pytest.approx(0.3) and s["shadow_photons"] is False
+    assert s["samples"] == 4
+    stages = data["pipeline"]["stages"]
+    assert "irradiance_cache" in stages and stages["irradiance_cache"]["records"] > 0
+    # The preset's values are what rendered: 4 spp and a 6 x 24 gather (not --gather 3x7).
+    assert stages["irradiance_cache"]["gather"] == "6x24"
+    assert stages["camera"]["camera_rays"] == 32 * 24 * 4
+    line = run_error(capfd, ["render", "-o", str(exr), "--gather", "0x8"])
+    assert "--gather" in line
+
+
 def test_render_a_saved_blend_with_border(tmp_path, capfd):
     blend = tmp_path / "s2.blend"
     assert cli.main(["scene", "scene2", "-o", str(blend)]) == 0

@@ -240,6 +240,14 @@ def _apply_overrides(scene, args) -> None:
         settings.cache_error = args.cache_error
     if args.no_shadow_photons:
         settings.shadow_photons = False
+    preset = args.preset or str(settings.preset).lower()
+    if preset != "custom":
+        overridden = [f"--{flag.replace('_', '-')}" for flag in
+                      ("samples", "light_samples", "photons", "gather", "cache_error", "indirect")
+                      if getattr(args, flag) is not None]
+        if overridden:
+            print(f"{PROG}: warning: the {preset} preset sets {', '.join(overridden)}; "
+                  "those flags are ignored (use --preset custom)", file=sys.stderr)
     for flag in ("mode", "photon_filter", "indirect", "preset"):   # core names -> enum ids
         value = getattr(args, flag)
         if value is not None:
@@ -349,7 +357,8 @@ def cmd_render(args) -> int:
     border = export.render_border(scene.render, resolution)
     try:
         lscene = export.export_scene(depsgraph, resolution=resolution, border=border)
-        settings = export.export_settings(scene)
+        settings = export.export_settings(scene).resolved()    # the preset's values in place
+        settings.validate()
     except SceneError as exc:
         raise UsageError(str(exc)) from None
     export_seconds = time.perf_counter() - t0
