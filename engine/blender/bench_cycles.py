@@ -13,8 +13,8 @@ What it computes (``lanterna bench --vs-cycles`` or
     2. Cycles on the CPU with the settings of the GI references (``configure_cycles(...,
        gi=True)`` of ``tests/data/make_cycles_refs.py``, imported from it: 64 bounces, caustics
        on, no clamping, no adaptive sampling, light threshold 0, Blackman-Harris 1.5, no path
-       guiding; a copy of those settings is used where that file cannot be imported, and the
-       output says so) at each of ``--cycles-samples`` (64, 256, 1024), without and with the
+       guiding; the benchmark runs from a checkout, and says so if that file is missing) at
+       each of ``--cycles-samples`` (64, 256, 1024), without and with the
        OpenImageDenoise denoiser (CPU, albedo + normal passes, prefilter ``ACCURATE``). Each is
        rendered to a float EXR and read back with OpenEXR (row 0 = top); its time is the wall
        time of ``bpy.ops.render.render(write_still=True)`` (scene sync, BVH, path tracing,
@@ -34,7 +34,8 @@ Errors (against the reference ``ref``, over all pixels and the three channels)
     against the noise-free picture. v is known per 4 x 4 block for the stored references
     (``region_se_pixels`` holds the 4 seeds' per-pixel variance, averaged per block) and from
     the 2 seeds' difference for a rendered one. As a cross-check v is also fitted from Cycles'
-    own 64 and 256 spp errors (MSE = V/spp + v). Since v is the same for every method, the
+    own 64 and 256 spp errors (MSE = V/spp + v; JSON only, fragile: Cycles' QMC error can fall
+    faster than 1/spp and fireflies make the MSE noisy). Since v is the same for every method, the
     comparisons below come out the same with or without it; only their ratios change.
     worst block = max over the 4 x 4 blocks of |mean(img) / mean(ref) - 1|, the means taken
     over the block's pixels and channels.
@@ -50,6 +51,20 @@ Why 160 x 120 by default
     ``--resolution 640x480`` on a bigger machine: the reference is rendered once and cached.
     Scene 2's stored reference is noisy (worst 4 x 4 block SE 2 %, see tests/data/README.md):
     its noise-corrected column is the one to read there.
+
+``--compare-at WxH`` (a proxy for the error at a resolution without a reference)
+    Everything is rendered at ``--resolution`` (e.g. 640 x 480) and timed there; then every
+    image, Lanterna's and each Cycles render, is box-downsampled by the integer factor k (the
+    mean of each k x k block of pixels; 4 for 640x480 -> 160x120) and compared at ``WxH`` with
+    the reference of that resolution (the stored one at 160 x 120, else one rendered at WxH and
+    cached as above). A non-integer factor, or different factors for width and height, is
+    refused. The reference's noise v is that of the WxH reference, so the correction above
+    holds unchanged. Both methods go through the same downsampling, so comparing them is fair,
+    but the figures are not the per-pixel errors at ``--resolution``: the downsampling averages
+    away most of each render's pixel noise (k^2 pixels per compared pixel), and it leaves a
+    small floor common to both, as a k x k box of pixels filtered with Blackman-Harris 1.5 px
+    is not the same pixel filter as the reference's Blackman-Harris 1.5 px at WxH (edges differ
+    slightly); Cycles' own error at high spp shows how high that floor is at most.
 
 This is a benchmark, not a test: it asserts nothing, prints the figures and the two checks,
 and ``--json FILE`` saves all of them. Expected failures (a scene that cannot be built or
@@ -124,81 +139,20 @@ def _blender_output_to(path: str):
 GI_BOUNCES = 64
 
 
-def _configure_cycles_copy(scene, samples: int, seed: int, gi: bool = True) -> dict:
-    """Copy of ``configure_cycles(..., gi=True)`` of tests/data/make_cycles_refs.py, used only
-    when that file cannot be imported (an installed package without tests/)."""
-    scene.render.engine = "CYCLES"
-    c = scene.cycles
-    c.device = "CPU"
-    c.samples = samples
-    c.seed = seed
-    c.use_animated_seed = False
-    c.max_bounces = c.diffuse_bounces = c.glossy_bounces = c.transmission_bounces = GI_BOUNCES
-    c.volume_bounces = 0
-    c.transparent_max_bounces = 8
-    c.use_denoising = False
-    c.use_adaptive_sampling = False
-    c.sample_clamp_direct = 0.0
-    c.sample_clamp_indirect = 0.0
-    c.light_sampling_threshold = 0.0
-    c.pixel_filter_type = "BLACKMAN_HARRIS"
-    c.filter_width = 1.5
-    c.caustics_reflective = True
-    c.caustics_refractive = True
-    c.blur_glossy = 0.0
-    c.use_guiding = False
-    scene.render.film_transparent = False
-    scene.render.use_persistent_data = False
-    scene.view_settings.view_transform = "Standard"
-    scene.view_settings.look = "None"
-    scene.view_settings.exposure = 0.0
-    scene.view_settings.gamma = 1.0
-    return {k: getattr(c, k) for k in (
-        "device", "samples", "seed", "max_bounces", "diffuse_bounces", "glossy_bounces",
-        "transmission_bounces", "use_denoising", "use_adaptive_sampling", "sample_clamp_direct",
-        "sample_clamp_indirect", "light_sampling_threshold", "pixel_filter_type", "filter_width",
-        "caustics_reflective", "caustics_refractive", "blur_glossy", "use_guiding")}
-
-
-def _render_exr_copy(scene, path: str):
-    """Copy of ``render_exr`` of tests/data/make_cycles_refs.py: (H, W, 3) float64, row 0 =
-    top, and the wall time of the render call (writing included, reading excluded)."""
-    import bpy
-    import OpenEXR
-
-    fmt = scene.render.image_settings
-    fmt.file_format = "OPEN_EXR"
-    fmt.color_depth = "32"
-    fmt.exr_codec = "ZIP"
-    fmt.color_mode = "RGBA"
-    scene.render.filepath = path
-    scene.render.use_file_extension = False
-    t0 = time.perf_counter()
-    bpy.ops.render.render(write_still=True, scene=scene.name)
-    seconds = time.perf_counter() - t0
-    channels = OpenEXR.File(path).channels()
-    if "RGBA" in channels:
-        pixels = channels["RGBA"].pixels[..., :3]
-    elif "RGB" in channels:
-        pixels = channels["RGB"].pixels
-    else:
-        pixels = np.dstack([channels[k].pixels for k in "RGB"])
-    return np.asarray(pixels, dtype=np.float64), seconds
-
-
 def cycles_functions():
-    """(configure_cycles, render_exr, source) from tests/data/make_cycles_refs.py when it can
-    be imported, else the copies above."""
+    """(configure_cycles, render_exr, source) from tests/data/make_cycles_refs.py: the Cycles
+    settings of the references, so the peers render exactly as the references were made. The
+    benchmark runs from a checkout of the repository (it needs tests/data anyway)."""
     path = REPO / "tests" / "data" / "make_cycles_refs.py"
     try:
         spec = importlib.util.spec_from_file_location("make_cycles_refs", path)
         module = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(module)
-        return module.configure_cycles, module.render_exr, "imported from tests/data/make_cycles_refs.py"
-    except Exception as exc:  # noqa: BLE001 - any failure: fall back to the copy
+    except Exception as exc:  # noqa: BLE001 - reported as one line
         reason = " ".join(str(exc).split()) or type(exc).__name__
-        return (_configure_cycles_copy, _render_exr_copy,
-                f"copy of tests/data/make_cycles_refs.py settings (import failed: {reason})")
+        raise BenchError(f"cannot load the Cycles reference settings from {path}: {reason} "
+                         "(run from a checkout of the repository)") from None
+    return module.configure_cycles, module.render_exr, "settings of tests/data/make_cycles_refs.py"
 
 
 def set_denoiser(scene) -> dict:
@@ -227,6 +181,15 @@ def block_means(image: np.ndarray, grid=GRID) -> np.ndarray:
     h, w, c = image.shape
     gy, gx = grid
     return image.reshape(gy, h // gy, gx, w // gx, c).mean(axis=(1, 3, 4))
+
+
+def box_downsample(image: np.ndarray, factor: int) -> np.ndarray:
+    """(H, W, C) -> (H / factor, W / factor, C): the mean of each factor x factor block."""
+    image = np.asarray(image, np.float64)
+    if factor == 1:
+        return image
+    h, w, c = image.shape
+    return image.reshape(h // factor, factor, w // factor, factor, c).mean(axis=(1, 3))
 
 
 def errors(image: np.ndarray, ref: np.ndarray, ref_var: float | None) -> dict:
@@ -298,7 +261,7 @@ def rendered_reference(name, bscene, resolution, samples, configure, render_exr,
 
 # -- One scene -----------------------------------------------------------------------------------
 def bench_scene(name, resolution, cycles_samples, reference_samples, cycles, tmpdir,
-                warm: dict) -> dict:
+                warm: dict, compare=None) -> dict:
     import bpy
 
     from . import seed_scenes
@@ -308,6 +271,8 @@ def bench_scene(name, resolution, cycles_samples, reference_samples, cycles, tmp
 
     configure, render_exr, _source = cycles
     w, h = resolution
+    compare = tuple(compare or resolution)
+    factor = w // compare[0]
     try:
         bscene = seed_scenes.build(name)
         bscene.render.resolution_x, bscene.render.resolution_y = w, h
@@ -316,7 +281,8 @@ def bench_scene(name, resolution, cycles_samples, reference_samples, cycles, tmp
     except Exception as exc:  # noqa: BLE001 - reported as one line
         raise BenchError(f"scene {name!r} cannot be built: {' '.join(str(exc).split())}") from None
 
-    out = {"scene": name, "resolution": [w, h], "rows": [], "failures": []}
+    out = {"scene": name, "resolution": [w, h], "compare_at": list(compare),
+           "downsample_factor": factor, "rows": [], "failures": []}
     # Lanterna
     _log(f"{name}: Lanterna, preset final ...")
     try:
@@ -378,11 +344,15 @@ def bench_scene(name, resolution, cycles_samples, reference_samples, cycles, tmp
     out["cycles_settings"] = {k: v for k, v in configure(bscene, 1, CYCLES_SEED, gi=True).items()
                               if k not in ("samples", "seed")}
 
-    # Reference and errors
-    ref = stored_reference(name, resolution)
+    # Reference and errors, at the comparison resolution
+    ref = stored_reference(name, compare)
     if ref is None:
-        ref = rendered_reference(name, bscene, resolution, reference_samples, configure,
-                                 render_exr, tmpdir)
+        bscene.render.resolution_x, bscene.render.resolution_y = compare
+        try:
+            ref = rendered_reference(name, bscene, compare, reference_samples, configure,
+                                     render_exr, tmpdir)
+        finally:
+            bscene.render.resolution_x, bscene.render.resolution_y = w, h
     ref_image = ref["image"]
     mean_ref = float(ref_image.mean())
     out["reference"] = {"source": ref["source"], "samples": ref["samples"],
@@ -392,8 +362,9 @@ def bench_scene(name, resolution, cycles_samples, reference_samples, cycles, tmp
     for row in out["rows"]:
         key = (("lanterna", None, False) if row["method"] == "Lanterna"
                else ("cycles", row["samples"], row["denoiser"]))
-        row.update(errors(images[key], ref_image, ref["variance"]))
-    # Cross-check of the reference noise: Cycles' MSE = V / spp + v at 64 and 256 spp.
+        row.update(errors(box_downsample(images[key], factor), ref_image, ref["variance"]))
+    # Cross-check of the reference noise: Cycles' MSE = V / spp + v at 64 and 256 spp. JSON
+    # only: fragile (Cycles' QMC error can fall faster than 1/spp, fireflies make MSE noisy).
     by = {(r["samples"], r["denoiser"]): r for r in out["rows"] if r["method"] == "Cycles"}
     if (64, False) in by and (256, False) in by:
         m64, m256 = by[(64, False)]["mse"], by[(256, False)]["mse"]
@@ -428,10 +399,15 @@ def _pct(x) -> str:
 def print_scene(out: dict) -> None:
     w, h = out["resolution"]
     ref = out["reference"]
-    print(f"\n{SCENE_TITLES.get(out['scene'], out['scene'])} ({out['scene']}) at {w}x{h}")
-    print(f"  reference: {ref['source']}; its noise: RMS {_pct(ref['rel_rms_noise']).strip()} of"
-          f" the mean" + (f" (fit from Cycles 64/256: {_pct(ref['rel_rms_noise_fit_from_cycles']).strip()})"
-                           if "rel_rms_noise_fit_from_cycles" in ref else ""))
+    k = out.get("downsample_factor", 1)
+    where = f"at {w}x{h}"
+    if k > 1:
+        cw, ch = out["compare_at"]
+        where = (f"rendered and timed at {w}x{h}; errors at {cw}x{ch} after {k}x{k} box "
+                 f"downsampling of every image")
+    print(f"\n{SCENE_TITLES.get(out['scene'], out['scene'])} ({out['scene']}) {where}")
+    print(f"  reference: {ref['source']}; its per-pixel noise: RMS "
+          f"{_pct(ref['rel_rms_noise']).strip()} of the mean")
     if out["scene"] == "scene2" and ref["source"].startswith("stored"):
         print("  note: Scene 2's stored reference is noisy (worst 4x4 block SE 2 %, "
               "tests/data/README.md); read the corrected column")
@@ -474,6 +450,25 @@ def _resolution(text: str):
     return w, h
 
 
+def _compare_at(text, resolution):
+    """``--compare-at`` -> (resolution, integer factor); refuses a non-integer factor."""
+    if text is None:
+        return tuple(resolution), 1
+    try:
+        cw, ch = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise BenchError(f"--compare-at must look like 160x120, got {text!r}") from None
+    w, h = resolution
+    if cw < 1 or ch < 1 or w % cw or h % ch or w // cw != h // ch:
+        raise BenchError(f"--compare-at {cw}x{ch}: needs one integer downsampling factor from "
+                         f"--resolution {w}x{h}, got {w}/{cw} = {w / cw:g} and "
+                         f"{h}/{ch} = {h / ch:g}")
+    if cw < GRID[1] or ch < GRID[0] or cw % GRID[1] or ch % GRID[0]:
+        raise BenchError(f"--compare-at {cw}x{ch}: width and height must be multiples of "
+                         f"{GRID[1]} and {GRID[0]} (the 4 x 4 block grid)")
+    return (cw, ch), w // cw
+
+
 def _int_list(text: str, flag: str):
     try:
         values = [int(v) for v in text.split(",") if v.strip()]
@@ -490,9 +485,13 @@ def parse_args(argv):
     parser.add_argument("--scenes", default=",".join(DEFAULT_SCENES))
     parser.add_argument("--cycles-samples", default=",".join(map(str, DEFAULT_CYCLES_SAMPLES)))
     parser.add_argument("--reference-samples", default=str(DEFAULT_REFERENCE_SAMPLES))
+    parser.add_argument("--compare-at", default=None, metavar="WxH",
+                        help="box-downsample every image by the integer factor to WxH and "
+                             "compare there (e.g. --resolution 640x480 --compare-at 160x120)")
     parser.add_argument("--json", default=None)
     args = parser.parse_args(argv)
     args.resolution = _resolution(args.resolution)
+    args.compare_at, args.factor = _compare_at(args.compare_at, args.resolution)
     args.scenes = [s.strip() for s in args.scenes.split(",") if s.strip()]
     if not args.scenes:
         raise BenchError("--scenes is empty")
@@ -515,7 +514,8 @@ def run(args) -> tuple[dict, int]:
         if not os.path.isdir(parent):
             raise BenchError(f"--json {args.json}: directory {parent} does not exist")
     cycles = cycles_functions()
-    results = {"resolution": list(args.resolution), "cycles_samples": args.cycles_samples,
+    results = {"resolution": list(args.resolution), "compare_at": list(args.compare_at),
+               "downsample_factor": args.factor, "cycles_samples": args.cycles_samples,
                "cycles_settings_source": cycles[2], "oidn_in_build": oidn_available(),
                "definitions": {
                    "rel_rmse": "sqrt(mean((img - ref)^2)) / mean(ref), all pixels and channels",
@@ -524,11 +524,23 @@ def run(args) -> tuple[dict, int]:
                    "worst_block": "max over 4x4 blocks of |mean(img)/mean(ref) - 1|, means over "
                                   "the block's pixels and channels",
                    "seconds": "wall time of pipeline.render (Lanterna) / "
-                              "bpy.ops.render.render(write_still=True) (Cycles)"},
+                              "bpy.ops.render.render(write_still=True) (Cycles), at "
+                              "'resolution'",
+                   "compare_at": "errors computed at this resolution, every image (Lanterna's "
+                                 "and Cycles') box-downsampled by 'downsample_factor' first: a "
+                                 "proxy, not the per-pixel error at 'resolution'"},
                "scenes": {}, "errors": []}
     print(f"Lanterna (preset final) vs Cycles (CPU, {cycles[2]}) at "
           f"{args.resolution[0]}x{args.resolution[1]}; OIDN in this bpy: "
           f"{'yes' if results['oidn_in_build'] else 'NO'}")
+    if args.factor > 1:
+        cw, ch = args.compare_at
+        k = args.factor
+        print(f"errors at {cw}x{ch} after {k}x{k} box downsampling: every image (Lanterna's and "
+              f"Cycles') rendered and timed at {args.resolution[0]}x{args.resolution[1]}, then "
+              f"averaged over {k}x{k} pixel blocks and compared with the {cw}x{ch} reference; "
+              f"fair between the methods, but a proxy, not the per-pixel error at "
+              f"{args.resolution[0]}x{args.resolution[1]}")
     print("rel RMSE = sqrt(mean((img - ref)^2)) / mean(ref) over all pixels and channels;"
           " corrected = with the reference's own noise variance taken out;"
           " worst block = max |block mean / reference - 1| over 4x4 blocks")
@@ -538,7 +550,8 @@ def run(args) -> tuple[dict, int]:
         for name in args.scenes:
             try:
                 out = bench_scene(name, args.resolution, args.cycles_samples,
-                                  args.reference_samples, cycles, tmpdir, warm)
+                                  args.reference_samples, cycles, tmpdir, warm,
+                                  compare=args.compare_at)
             except BenchError as exc:
                 print(f"lanterna bench: error: {exc}", file=sys.stderr)
                 results["errors"].append(str(exc))
