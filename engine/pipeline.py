@@ -89,6 +89,7 @@ from .plan import make_plan
 from .scene import Scene, SceneError
 
 TARGET_BATCH_SAMPLES = 1 << 16
+GATHER_RAYS_PER_CALL = 1 << 19   # final-gather rays in flight per call (memory: ~150 B a ray)
 
 
 MODES = ("full", "photon-map")
@@ -98,7 +99,7 @@ PRESETS = {
     "preview": dict(samples=4, light_samples=2, photons=200_000, gather_m=6, gather_n=24,
                     cache_error=0.3, indirect="cache"),
     "final": dict(samples=16, light_samples=8, photons=1_000_000, gather_m=12, gather_n=48,
-                  cache_error=0.15, indirect="cache"),
+                  cache_error=0.1, indirect="cache"),
 }
 INDIRECT_METHODS = ("cache", "gather", "photon-map")
 PHOTON_FILTERS = ("none", "cone")
@@ -402,7 +403,14 @@ class _FinalGather:
                             guide_extra=self.guide_extra)
 
     def irradiance(self, x, ns, ng, rng, stats):
-        return self.gather(x, ns, ng, rng, stats)[0]
+        # Bounded memory: at most about GATHER_RAYS_PER_CALL rays per final_gather call.
+        rays_per_point = self.m * self.n * (1.0 + self.guide_extra)
+        step = max(1, int(GATHER_RAYS_PER_CALL // rays_per_point))
+        out = np.empty((len(x), 3))
+        for a in range(0, len(x), step):
+            b = min(a + step, len(x))
+            out[a:b] = self.gather(x[a:b], ns[a:b], ng[a:b], rng, stats)[0]
+        return out
 
 
 def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArrays,

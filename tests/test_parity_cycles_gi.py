@@ -89,13 +89,11 @@ def test_full_mode_matches_cycles_with_all_bounces(name):
                          REF_SIGMAS.get(name, 0.0))
 
 
-# Scene 2 is not in this list yet: its view is lit almost only by light that bounced once off
-# the inside of the tube around the lamp, a small patch 1000x brighter than the room. A
-# stratified gather of 576 rays catches it rarely, so cache records scatter widely (heavy
-# tailed) and the final preset's blocks come out -11 % to +9 % off (issue 4 stays open on
-# this; importance sampling the gather from the photon map is the known remedy). The photon
-# map looked up at the hit handles it (test above, within 2.2 %).
-FINAL_SCENES = ("scene1", "cornell")
+# Scene 2 is lit almost only by light that bounced once off the inside of the lamp's tube, a
+# small patch 1000x brighter than the room, and the knot casts an "indirect shadow" of it on
+# the floor that Ward's error metric (geometric distances) does not foresee. It needs the
+# photon-guided gather and a = 0.1 (measured: a = 0.15 left the knot's shadow 9 % dark).
+FINAL_SCENES = ("scene1", "cornell", "scene2")
 FINAL_REL_TOL = 0.03          # issue 4: the final preset within 3 %
 FINAL_MAX_NOISE = 0.0075      # so that 3 % is at least 4 sigma
 

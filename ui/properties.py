@@ -80,7 +80,7 @@ class LanternaSceneSettings(bpy.types.PropertyGroup):
         items=(
             ('CUSTOM', "Custom", "Use the settings below"),
             ('PREVIEW', "Preview", "Fast: 4 spp, 200k photons, gather 6x24, cache error 0.3"),
-            ('FINAL', "Final", "16 spp, 1M photons, gather 12x48, cache error 0.15"),
+            ('FINAL', "Final", "16 spp, 1M photons, gather 12x48, cache error 0.1"),
         ),
         default='CUSTOM',
     )
