@@ -89,3 +89,17 @@ def test_presets_set_their_values():
     assert RenderSettings(samples=99).resolved().samples == 99              # custom keeps them
     with pytest.raises(SceneError, match="preset"):
         RenderSettings(preset="ultra").resolved()
+
+
+def test_forcing_shadow_photons_without_area_lights_changes_nothing():
+    """Only a point light: the planner skips shadow photons. Forced on, the map is built but
+    covers no light (points need none), so every shadow ray is traced as before and the
+    picture is the same sample for sample."""
+    scene = _room([Material("white", diffuse=0.7)], [PointLight("P", [1, 1, 1.8], [50.0] * 3)])
+    settings = dict(samples=2, bounces=0)
+    plain = render(scene, RenderSettings(**settings))
+    forced = render(scene, RenderSettings(force="shadow_photons", **settings))
+    assert _stages(plain)["shadow_photons"].startswith("skipped")
+    assert _stages(forced)["shadow_photons"].startswith("forced on")
+    assert "shadow_photons" in forced.report["stages"]
+    np.testing.assert_array_equal(forced.image, plain.image)
