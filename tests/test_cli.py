@@ -181,7 +181,8 @@ def test_photon_flags_reach_the_pipeline(tmp_path, capfd):
 def test_preset_and_indirect_flags(tmp_path, capfd):
     exr, report = tmp_path / "q.exr", tmp_path / "q.json"
     code = cli.main(["render", "--resolution", "32x24", "--preset", "preview", "--gather", "3x7",
-                     "--cache-error", "0.4", "--no-shadow-photons", "-o", str(exr),
+                     "--cache-error", "0.4", "--gather-guided", "2.5", "--no-shadow-photons",
+                     "-o", str(exr),
                      "--report", str(report), "--quiet"])
     err = capfd.readouterr().err
     assert code == 0, err
@@ -190,7 +191,7 @@ def test_preset_and_indirect_flags(tmp_path, capfd):
     s = data["settings"]                         # as rendered: the preset's values
     assert s["preset"] == "preview" and (s["gather_m"], s["gather_n"]) == (6, 24)
     assert s["cache_error"] == pytest.approx(0.3) and s["shadow_photons"] is False
-    assert s["samples"] == 4
+    assert s["samples"] == 4 and s["gather_guided"] == 2.5      # not a preset value: kept
     stages = data["pipeline"]["stages"]
     assert "irradiance_cache" in stages and stages["irradiance_cache"]["records"] > 0
     # The preset's values are what rendered: 4 spp and a 6 x 24 gather (not --gather 3x7).

@@ -88,6 +88,7 @@ class LANTERNA_RENDER_PT_photons(LanternaPanel, bpy.types.Panel):
         sub.active = settings.indirect != 'PHOTON_MAP' and settings.preset == 'CUSTOM'
         sub.prop(settings, "gather_m")
         sub.prop(settings, "gather_n")
+        sub.prop(settings, "gather_guided")
         sub.prop(settings, "cache_error")
         col.prop(settings, "shadow_photons")
 

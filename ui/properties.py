@@ -106,6 +106,12 @@ class LanternaSceneSettings(bpy.types.PropertyGroup):
         description="Final gather: strata in the azimuth (N of M x N rays)",
         default=32, min=1, max=1024, soft_max=256, subtype='NONE',
     )
+    gather_guided: FloatProperty(
+        name="Guided Rays",
+        description=("Final gather: extra rays, as a multiple of M x N, steered into the "
+                     "directions nearby photons came from (Jensen 1995); 0 = off"),
+        default=1.0, min=0.0, max=64.0, soft_max=8.0, precision=2, subtype='NONE',
+    )
     cache_error: FloatProperty(
         name="Cache Error",
         description="Irradiance cache: largest error a; records are used where w > 1/a (Eq. 10.3)",

@@ -8,7 +8,7 @@ Usage
     ``[--bounces N] [--seed N] [--threads N] [--mode full|photon-map] [--photons N]``
     ``[--photon-k N] [--photon-radius R] [--photon-filter none|cone] [--photon-lookups N]``
     ``[--preset custom|preview|final] [--indirect cache|gather|photon-map] [--gather MxN]``
-    ``[--cache-error A] [--no-shadow-photons]``
+    ``[--gather-guided X] [--cache-error A] [--no-shadow-photons]``
 
     Renders the active scene of ``SCENE.blend`` with Lanterna (whatever engine the file names),
     or the seed's Scene 1 (``--scene`` picks another) when no file is given. Flags override
@@ -150,6 +150,9 @@ def build_parser() -> argparse.ArgumentParser:
                              "every sample, or the photon map at the hit")
     render.add_argument("--gather", type=_grid, metavar="MxN",
                         help="final gather strata: M in theta x N in phi (default 8x32)")
+    render.add_argument("--gather-guided", type=_float_at_least(0.0), metavar="X",
+                        help="extra gather rays, X times M x N, steered by nearby photons "
+                             "(default 1; 0 = off)")
     render.add_argument("--cache-error", type=_float_at_least(0.01), metavar="A",
                         help="irradiance cache error a (default 0.2)")
     render.add_argument("--no-shadow-photons", action="store_true",
@@ -238,6 +241,8 @@ def _apply_overrides(scene, args) -> None:
         settings.gather_m, settings.gather_n = args.gather
     if args.cache_error is not None:
         settings.cache_error = args.cache_error
+    if args.gather_guided is not None:
+        settings.gather_guided = min(args.gather_guided, 64.0)
     if args.no_shadow_photons:
         settings.shadow_photons = False
     preset = args.preset or str(settings.preset).lower()
