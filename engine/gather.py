@@ -46,6 +46,7 @@ from . import sampling
 
 LOOKUP_NEIGHBOURS = 4       # nearest estimates inspected for one with an agreeing normal
 GUIDE_PHOTONS = 128         # nearby photons whose directions steer a guided gather
+GATHER_RAYS_PER_CALL = 1 << 19   # rays in flight per chunk of final_gather (~150 B a ray)
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 
@@ -169,7 +170,23 @@ def final_gather(points: np.ndarray, normals: np.ndarray, offset_normals: np.nda
     through (``photon_guided_allocation``); None: one ray per stratum.
 
     Returns (E (P, 3), L (P, M, N, 3), r (P, M, N)): irradiance, per-stratum radiance (the
-    mean of its rays) and hit distance of its first ray (inf for a miss)."""
+    mean of its rays) and hit distance of its first ray (inf for a miss). Points are taken in
+    chunks of at most about ``GATHER_RAYS_PER_CALL`` rays, so memory stays bounded however
+    many points a caller passes (75M rays in one call was killed for memory)."""
+    extra = guide_extra if guide is not None else 0.0
+    step = max(1, int(GATHER_RAYS_PER_CALL // (m * n * (1.0 + extra))))
+    if len(points) <= step:
+        return _final_gather_chunk(points, normals, offset_normals, estimates, accel, arrays,
+                                   rng, m, n, max_specular, stats, guide, guide_extra)
+    parts = [_final_gather_chunk(points[a:a + step], normals[a:a + step],
+                                 offset_normals[a:a + step], estimates, accel, arrays, rng, m, n,
+                                 max_specular, stats, guide, guide_extra)
+             for a in range(0, len(points), step)]
+    return tuple(np.concatenate(arrays_) for arrays_ in zip(*parts))
+
+
+def _final_gather_chunk(points, normals, offset_normals, estimates, accel, arrays, rng, m, n,
+                        max_specular, stats, guide, guide_extra):
     count = len(points)
     cells = m * n
     alloc = photon_guided_allocation(points, normals, guide, m, n, guide_extra * cells, rng=rng) \

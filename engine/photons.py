@@ -356,12 +356,15 @@ class PhotonMap:
 
 
 def trace_photons(scene: Scene, accel, emitted: EmittedPhotons, rng: np.random.Generator,
-                  max_bounces: int = 64, ray_log: list | None = None) -> PhotonMap:
+                  max_bounces: int = 64, ray_log: list | None = None,
+                  geometric_normals: np.ndarray | None = None) -> PhotonMap:
     """Trace emitted photons (Russian roulette, 9.2) and store them at diffuse hits.
 
     All photons advance together: one Embree call per bounce for every live photon. Geometry
     is float32 (Embree's precision); powers stay float64 until they are stored. A photon that
-    survives its ``max_bounces``-th bounce is counted in ``capped_paths`` / ``flux_capped``."""
+    survives its ``max_bounces``-th bounce is counted in ``capped_paths`` / ``flux_capped``.
+    ``geometric_normals``: ``scene.geometric_normals()`` when the caller has them (the photon
+    pass computes them once for all its chunks)."""
     table = scene.material_table()
     rho_d = table["diffuse"].astype(np.float64)
     rho_s = table["specular"].astype(np.float64)
@@ -372,7 +375,8 @@ def trace_photons(scene: Scene, accel, emitted: EmittedPhotons, rng: np.random.G
     # Survivors' power scale per material: rho / P per channel (colour stays unbiased).
     scale_d = rho_d / np.where(p_d > 0, p_d, 1.0)[:, None]
     scale_s = rho_s / np.where(p_s > 0, p_s, 1.0)[:, None]
-    normals_geo = scene.geometric_normals().astype(np.float32)
+    normals_geo = (scene.geometric_normals() if geometric_normals is None
+                   else geometric_normals).astype(np.float32, copy=False)
     stores_at = p_d > 0                           # materials where photons are stored
     o = np.ascontiguousarray(emitted.origins, np.float32)
     d = np.ascontiguousarray(emitted.directions, np.float32)
@@ -532,11 +536,14 @@ def build_photon_map(scene: Scene, accel, count: int, seed: int = 0, max_bounces
     n = len(emitted.origins)
     bounds = [(a, min(a + PHOTON_CHUNK, n)) for a in range(0, n, PHOTON_CHUNK)]
 
+    normals_geo = scene.geometric_normals()
+
     def trace(i):
         a, b = bounds[i]
         part = EmittedPhotons(emitted.origins[a:b], emitted.directions[a:b], emitted.power[a:b])
         return trace_photons(scene, accel, part, sampling.rng_for(seed, sampling.STREAM_PHOTON, i + 1),
-                             max_bounces=max_bounces, ray_log=ray_log)
+                             max_bounces=max_bounces, ray_log=ray_log,
+                             geometric_normals=normals_geo)
 
     t0 = time.perf_counter()
     maps, was_cancelled = [], False

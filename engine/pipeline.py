@@ -89,7 +89,11 @@ from .plan import make_plan
 from .scene import Scene, SceneError
 
 TARGET_BATCH_SAMPLES = 1 << 16
-GATHER_RAYS_PER_CALL = 1 << 19   # final-gather rays in flight per call (memory: ~150 B a ray)
+# What each camera batch counts (rays, seconds of threads, look-ups); summed over batches.
+BATCH_COUNTERS = ("camera_rays", "shadow_rays", "specular_rays", "trace_seconds", "queries",
+                  "query_seconds", "estimate_seconds", "cache_interpolated", "cache_gathered",
+                  "gather_rays", "gather_points", "shadow_rays_saved", "shadow_lit",
+                  "shadow_umbra", "shadow_penumbra")
 
 
 MODES = ("full", "photon-map")
@@ -242,36 +246,6 @@ R_MIN_PIXELS = 1.5                       # a record reaches at least this many p
 R_MAX_PIXELS = 64.0                      # ... and at most this many (R clamped, DESIGN §4)
 
 
-def _record_radius(distances):
-    """A record's R_i [m] before clamping: the harmonic mean distance of the gather rays that
-    hit something. Ward's R, with misses counted as infinitely far, grows without bound where
-    half the rays leave through an opening although nearby surfaces still shape E (measured:
-    a box face by the open side of a Cornell box 3.5 % too dark). Limiting R further to
-    E / |grad_t E| (Krivanek et al. 2008) was tried and dropped: with noisy records it
-    shrinks exactly the records whose gather caught a bright patch, and the interpolated
-    picture came out 26 % too dark in the seed's Scene 2."""
-    r = distances.reshape(len(distances), -1)
-    hit = np.isfinite(r)
-    inv = np.where(hit, 1.0 / np.maximum(np.where(hit, r, 1.0), 1e-9), 0.0).sum(axis=1)
-    count = hit.sum(axis=1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(inv > 0, count / inv, np.inf)
-
-
-def _limit_translational_gradient(grad, irradiance, radius_raw, radius):
-    """Translational gradients (P, C, 3) made safe to extrapolate with (Krivanek et al. 2008,
-    Tabellion and Lamorlette 2004): where R_i was clamped up from R_raw, the gradient (whose
-    1/min(r) terms R_raw came from) is scaled by R_raw / R_i; and no channel may change by
-    more than its own E_i over the distance R_i (|grad| <= E_i / R_i). Without this a record
-    near a corner (gather distances of a millimetre) extrapolated to 100x its value."""
-    raw = np.where(np.isfinite(radius_raw), radius_raw, radius)
-    grad = grad * np.minimum(1.0, raw / radius)[:, None, None]
-    norm = np.linalg.norm(grad, axis=2)                                   # (P, C)
-    limit = irradiance / radius[:, None]
-    scale = np.where(norm > limit, limit / np.maximum(norm, 1e-300), 1.0)
-    return grad * scale[..., None]
-
-
 def _cache_prepass(scene, accel, arrays, gather: _FinalGather, settings, pool, tell, cancelled):
     """Place irradiance-cache records in passes of increasing image resolution (Ward's
     "overture", the seed's cache placement): the first hits of pixel centres on a grid of
@@ -280,7 +254,8 @@ def _cache_prepass(scene, accel, arrays, gather: _FinalGather, settings, pool, t
     [R_MIN_PIXELS, R_MAX_PIXELS] pixel footprints divided by a, so a record reaches between
     1.5 and 64 pixels: corners cannot drive R_i to 0, open walls cannot spread one record
     over the image."""
-    from .irradiance_cache import IrradianceCache, clamp_radius, irradiance_and_gradients
+    from .irradiance_cache import (IrradianceCache, clamp_radius, frames_from_normals,
+                                   irradiance_and_gradients, limit_translational_gradient)
 
     cam = scene.camera
     width, height = cam.window_size
@@ -317,12 +292,14 @@ def _cache_prepass(scene, accel, arrays, gather: _FinalGather, settings, pool, t
                 prng = sampling.rng_for(settings.seed, sampling.STREAM_GATHER,
                                         (pass_index << 16) + number)
                 e, radiance, dist = gather.gather(x[part], ns[part], ng[part], prng)
-                frames = sampling.orthonormal_basis(ns[part].astype(np.float64)) + (ns[part].astype(np.float64),)
-                g = irradiance_and_gradients(radiance, dist, gather.m, gather.n, frames)
-                raw = _record_radius(dist)
-                radius = clamp_radius(raw, R_MIN_PIXELS * footprint[part] / a,
+                frames = frames_from_normals(ns[part])
+                g = irradiance_and_gradients(radiance, dist, gather.m, gather.n, frames,
+                                             misses_count=False)
+                # (Limiting R further to E / |grad_t E| was tried and dropped: with noisy records
+                # it shrinks the ones that caught a bright patch; Scene 2 came out 26 % dark.)
+                radius = clamp_radius(g.radius, R_MIN_PIXELS * footprint[part] / a,
                                       R_MAX_PIXELS * footprint[part] / a)
-                trans = _limit_translational_gradient(g.trans_grad, g.irradiance, raw, radius)
+                trans = limit_translational_gradient(g.trans_grad, g.irradiance, g.radius, radius)
                 return part, g.irradiance, radius, g.rot_grad, trans
 
             for part, e, radius, rot, trans in pool.map(record, parts, range(len(parts))):
@@ -333,10 +310,6 @@ def _cache_prepass(scene, accel, arrays, gather: _FinalGather, settings, pool, t
              f"Irradiance cache: pass {pass_index + 1}/{len(CACHE_STRIDES)}, {len(cache):,} records")
     stats["records"] = len(cache)
     return cache, stats
-
-
-def was_cancelled_before_camera(photon_map) -> bool:
-    return bool(photon_map is not None and photon_map.stats.get("cancelled"))
 
 
 def _surface_normals(arrays: _SceneArrays, prim, bu, bv, d):
@@ -403,25 +376,15 @@ class _FinalGather:
                             guide_extra=self.guide_extra)
 
     def irradiance(self, x, ns, ng, rng, stats):
-        # Bounded memory: at most about GATHER_RAYS_PER_CALL rays per final_gather call.
-        rays_per_point = self.m * self.n * (1.0 + self.guide_extra)
-        step = max(1, int(GATHER_RAYS_PER_CALL // rays_per_point))
-        out = np.empty((len(x), 3))
-        for a in range(0, len(x), step):
-            b = min(a + step, len(x))
-            out[a:b] = self.gather(x[a:b], ns[a:b], ng[a:b], rng, stats)[0]
-        return out
+        return self.gather(x, ns, ng, rng, stats)[0]
 
 
 def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArrays,
                         accel: Accelerator, lights: LightSet, settings: RenderSettings,
                         ray_log: list | None, photon=None, shadow_map=None):
     """Radiance for the pixels of one batch: (pixels, 3) mean over their samples."""
-    stats = {"camera_rays": 0, "shadow_rays": 0, "specular_rays": 0,
-             "trace_seconds": 0.0, "seconds": 0.0, "queries": 0, "query_seconds": 0.0,
-             "estimate_seconds": 0.0, "cache_interpolated": 0,
-             "cache_gathered": 0, "gather_rays": 0, "gather_points": 0,
-             "shadow_rays_saved": 0, "shadow_lit": 0, "shadow_umbra": 0, "shadow_penumbra": 0}
+    stats = dict.fromkeys(BATCH_COUNTERS, 0)
+    stats["seconds"] = 0.0
     direct_light = settings.mode == "full"
     started = time.perf_counter()
     rng = sampling.rng_for(settings.seed, sampling.STREAM_CAMERA, batch)
@@ -660,8 +623,9 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
                 "dropped (a very bright enclosure?)")
 
     # shadow photons: lit / umbra / penumbra classes for area and mesh lights (seed 9.6)
+    was_cancelled = bool(pmap is not None and pmap.stats["cancelled"])
     shadow_map = None
-    if plan["shadow_photons"] and not was_cancelled_before_camera(pmap):
+    if plan["shadow_photons"] and not was_cancelled:
         from .shadow_photons import build_shadow_photon_map
         tell(0.0, "Shadow photons")
         t0 = time.perf_counter()
@@ -674,13 +638,9 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
     batch_pixels = max(1, TARGET_BATCH_SAMPLES // settings.samples)
     ranges = [(p, min(p + batch_pixels, pixel_count)) for p in range(0, pixel_count, batch_pixels)]
     image = np.zeros((pixel_count, 3), np.float32)
-    totals = {"camera_rays": 0, "shadow_rays": 0, "specular_rays": 0, "trace_seconds": 0.0,
-              "batch_seconds": 0.0, "queries": 0, "query_seconds": 0.0, "estimate_seconds": 0.0,
-              "cache_interpolated": 0, "cache_gathered": 0, "gather_rays": 0,
-              "gather_points": 0, "shadow_rays_saved": 0, "shadow_lit": 0, "shadow_umbra": 0,
-              "shadow_penumbra": 0}
+    totals = dict.fromkeys(BATCH_COUNTERS, 0)
+    totals["batch_seconds"] = 0.0
     t0 = time.perf_counter()
-    was_cancelled = bool(pmap is not None and pmap.stats["cancelled"])
     done = 0
     label = "Rendering" if settings.mode == "full" else "Photon map"
     tell(0.0, f"{label}: 0/{len(ranges)} batches")
@@ -703,11 +663,7 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
                 a, b = pending.pop(fut)
                 pixels, batch_stats = fut.result()
                 image[a:b] = pixels
-                for key in ("camera_rays", "shadow_rays", "specular_rays", "trace_seconds",
-                                "queries", "query_seconds", "estimate_seconds",
-                                "cache_interpolated", "cache_gathered",
-                                "gather_rays", "gather_points", "shadow_rays_saved",
-                                "shadow_lit", "shadow_umbra", "shadow_penumbra"):
+                for key in BATCH_COUNTERS:
                     totals[key] += batch_stats[key]
                 totals["batch_seconds"] += batch_stats["seconds"]
                 done += 1

@@ -5,15 +5,10 @@ classes = ()
 
 
 def register():
-    import bpy
-
-    for cls in classes:
-        bpy.utils.register_class(cls)
+    from ..engine.blender.registration import register_classes
+    register_classes(classes)
 
 
 def unregister():
-    import bpy
-
-    for cls in reversed(classes):
-        if getattr(cls, "is_registered", False):
-            bpy.utils.unregister_class(cls)
+    from ..engine.blender.registration import unregister_classes
+    unregister_classes(classes)

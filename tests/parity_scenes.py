@@ -102,12 +102,17 @@ def _material_principled(name, colour):
     return mat
 
 
-def _material_diffuse(name, colour):
+def _empty_material(name):
+    """A new material whose node tree holds only its output node: (material, tree, output)."""
     mat = bpy.data.materials.new(name)
     tree = mat.node_tree
     for node in list(tree.nodes):
         tree.nodes.remove(node)
-    out = tree.nodes.new("ShaderNodeOutputMaterial")
+    return mat, tree, tree.nodes.new("ShaderNodeOutputMaterial")
+
+
+def _material_diffuse(name, colour):
+    mat, tree, out = _empty_material(name)
     bsdf = tree.nodes.new("ShaderNodeBsdfDiffuse")
     bsdf.inputs["Color"].default_value = (*colour, 1.0)
     bsdf.inputs["Roughness"].default_value = 0.0
@@ -116,11 +121,7 @@ def _material_diffuse(name, colour):
 
 
 def _material_emission(name, colour, strength):
-    mat = bpy.data.materials.new(name)
-    tree = mat.node_tree
-    for node in list(tree.nodes):
-        tree.nodes.remove(node)
-    out = tree.nodes.new("ShaderNodeOutputMaterial")
+    mat, tree, out = _empty_material(name)
     em = tree.nodes.new("ShaderNodeEmission")
     em.inputs["Color"].default_value = (*colour, 1.0)
     em.inputs["Strength"].default_value = strength

@@ -160,19 +160,31 @@ def _draw_node_input(layout, id_data, input_name: str) -> bool:
     return True
 
 
-class LANTERNA_MATERIAL_PT_surface(LanternaPanel, bpy.types.Panel):
+class _SurfacePanel(LanternaPanel):
+    """The node tree feeding the Surface input of ``context.<bl_context>`` (a material or the
+    world), or ``fallback`` (property, label) when it has no node tree."""
+
     bl_label = "Surface"
-    bl_context = "material"
+    fallback = ("color", None)
 
     @classmethod
     def poll(cls, context):
-        return context.material is not None and super().poll(context)
+        return getattr(context, cls.bl_context, None) is not None and super().poll(context)
 
     def draw(self, context):
         layout = _split(self.layout)
-        mat = context.material
-        if not _draw_node_input(layout, mat, "Surface"):
-            layout.prop(mat, "diffuse_color", text="Base Color")
+        owner = getattr(context, self.bl_context)
+        if not _draw_node_input(layout, owner, "Surface"):
+            prop, label = self.fallback
+            if label:
+                layout.prop(owner, prop, text=label)
+            else:
+                layout.prop(owner, prop)
+
+
+class LANTERNA_MATERIAL_PT_surface(_SurfacePanel, bpy.types.Panel):
+    bl_context = "material"
+    fallback = ("diffuse_color", "Base Color")
 
 
 class LANTERNA_MATERIAL_PT_radiometry(LanternaPanel, bpy.types.Panel):
@@ -252,19 +264,8 @@ class LANTERNA_LIGHT_PT_light(LanternaPanel, bpy.types.Panel):
 
 
 # -- World ------------------------------------------------------------------------------------
-class LANTERNA_WORLD_PT_surface(LanternaPanel, bpy.types.Panel):
-    bl_label = "Surface"
+class LANTERNA_WORLD_PT_surface(_SurfacePanel, bpy.types.Panel):
     bl_context = "world"
-
-    @classmethod
-    def poll(cls, context):
-        return context.world is not None and super().poll(context)
-
-    def draw(self, context):
-        layout = _split(self.layout)
-        world = context.world
-        if not _draw_node_input(layout, world, "Surface"):
-            layout.prop(world, "color")
 
 
 classes = (
@@ -311,8 +312,8 @@ def builtin_panels() -> list[type]:
 
 
 def register():
-    for cls in classes:
-        bpy.utils.register_class(cls)
+    from ..engine.blender.registration import register_classes
+    register_classes(classes)
     for panel in builtin_panels():
         if ENGINE_ID not in panel.COMPAT_ENGINES:
             panel.COMPAT_ENGINES.add(ENGINE_ID)
@@ -322,6 +323,5 @@ def register():
 def unregister():
     while _opened:
         _opened.pop().COMPAT_ENGINES.discard(ENGINE_ID)
-    for cls in reversed(classes):
-        if getattr(cls, "is_registered", False):
-            bpy.utils.unregister_class(cls)
+    from ..engine.blender.registration import unregister_classes
+    unregister_classes(classes)

@@ -189,8 +189,8 @@ _POINTERS = (
 
 
 def register():
-    for cls in classes:
-        bpy.utils.register_class(cls)
+    from ..engine.blender.registration import register_classes
+    register_classes(classes)
     for owner, group, description in _POINTERS:
         owner.lanterna = PointerProperty(type=group, name="Lanterna", description=description)
 
@@ -199,6 +199,5 @@ def unregister():
     for owner, _group, _description in reversed(_POINTERS):
         if hasattr(owner, "lanterna"):
             del owner.lanterna
-    for cls in reversed(classes):
-        if getattr(cls, "is_registered", False):
-            bpy.utils.unregister_class(cls)
+    from ..engine.blender.registration import unregister_classes
+    unregister_classes(classes)

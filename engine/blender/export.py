@@ -121,6 +121,16 @@ DEFAULT_DIFFUSE = 0.8
 _LUMA = np.array([0.2126, 0.7152, 0.0722])   # colour -> float conversion of a linked socket
 
 
+def _as_colour(v) -> np.ndarray:
+    """A socket value (colour or float) as RGB."""
+    return np.array(v[:3], float) if hasattr(v, "__len__") else np.full(3, float(v))
+
+
+def _as_scalar(v) -> float:
+    """A socket value (colour or float) as a float (a colour by its luminance)."""
+    return float(np.dot(_LUMA, v[:3])) if hasattr(v, "__len__") else float(v)
+
+
 # ---------------------------------------------------------------------------------------------
 # Warnings
 # ---------------------------------------------------------------------------------------------
@@ -300,36 +310,28 @@ class _NodeReader:
         self.warn(f"{self.owner}: {sock.name} of '{node.name}' is driven by {_article(label)} "
                   f"{label} node{named}; using its default {what} {_fmt(value)}")
 
-    def colour(self, node, *names, default=(0.0, 0.0, 0.0)) -> np.ndarray:
+    def _constant(self, node, names, default, convert, what):
+        """The input's value: its own default, or a constant RGB / Value node linked to it;
+        anything else linked is warned about (naming ``what``) and the default is used.
+        ``convert`` turns a socket value (a float or a sequence) into the wanted type."""
         sock = self.input(node, *names)
         if sock is None:
-            return np.array(default, float)
-        value = np.array(sock.default_value[:3], float) if hasattr(sock, "default_value") \
-            else np.array(default, float)
+            return convert(default)
+        value = convert(sock.default_value) if hasattr(sock, "default_value") else convert(default)
         src = self.source(sock)
         if src is None:
             return value
         src_node, out = src
         if src_node.type in ("RGB", "VALUE") and hasattr(out, "default_value"):
-            v = out.default_value
-            return np.array(v[:3], float) if hasattr(v, "__len__") else np.full(3, float(v))
-        self._linked_warning(node, sock, src_node, "colour", value)
+            return convert(out.default_value)
+        self._linked_warning(node, sock, src_node, what, value)
         return value
 
+    def colour(self, node, *names, default=(0.0, 0.0, 0.0)) -> np.ndarray:
+        return self._constant(node, names, default, _as_colour, "colour")
+
     def scalar(self, node, *names, default=0.0) -> float:
-        sock = self.input(node, *names)
-        if sock is None:
-            return float(default)
-        value = float(sock.default_value) if hasattr(sock, "default_value") else float(default)
-        src = self.source(sock)
-        if src is None:
-            return value
-        src_node, out = src
-        if src_node.type in ("RGB", "VALUE") and hasattr(out, "default_value"):
-            v = out.default_value
-            return float(np.dot(_LUMA, v[:3])) if hasattr(v, "__len__") else float(v)
-        self._linked_warning(node, sock, src_node, "value", value)
-        return value
+        return self._constant(node, names, default, _as_scalar, "value")
 
     def check_normal(self, node) -> None:
         sock = node.inputs.get("Normal")

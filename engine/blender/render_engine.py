@@ -140,11 +140,10 @@ classes = (LanternaRenderEngine,)
 
 
 def register():
-    for cls in classes:
-        bpy.utils.register_class(cls)
+    from .registration import register_classes
+    register_classes(classes)
 
 
 def unregister():
-    for cls in reversed(classes):
-        if getattr(cls, "is_registered", False):
-            bpy.utils.unregister_class(cls)
+    from .registration import unregister_classes
+    unregister_classes(classes)
