@@ -62,21 +62,3 @@ def unregister():
     for module in reversed(_modules()):
         module.unregister()
     _registered = False
-
-
-def register_classes(classes) -> None:
-    """Register ``classes`` in order (the loop every Lanterna module's ``register`` runs)."""
-    import bpy
-
-    for cls in classes:
-        bpy.utils.register_class(cls)
-
-
-def unregister_classes(classes) -> None:
-    """Unregister ``classes`` in reverse order, skipping those not registered (so that
-    ``unregister`` after a failed ``register`` cleans up without raising)."""
-    import bpy
-
-    for cls in reversed(classes):
-        if getattr(cls, "is_registered", False):
-            bpy.utils.unregister_class(cls)
