@@ -366,6 +366,8 @@ class LightSet:
                                                         light.radiance, two_sided=False))
                 else:
                     self.sampled.append(EllipseEmitter(light))
+                if not light.collimated:   # the per-light switch read by shadow_photons.py
+                    self.sampled[-1].shadow_photons = light.shadow_photons
         self.points_pos = np.array(self.points_pos, np.float64).reshape(-1, 3)
         self.points_intensity = np.array(self.points_intensity, np.float64).reshape(-1, 3)
 

@@ -17,9 +17,10 @@ What it computes
     final_gather        as radiance_estimates
     irradiance_cache    ``indirect`` = cache; records live on diffuse surfaces only
     shadow_photons      ``full`` mode, ``shadow_photons`` on, and an area light or emissive mesh
-                        large enough to cast a visible penumbra (its size above
-                        ``MIN_PENUMBRA_SIZE`` x the scene's extent); points, spots and suns
-                        cast hard shadows with one ray and need none
+                        with its own ``shadow_photons`` switch on (area lights: the light's
+                        flag; emissive meshes always) large enough to cast a visible penumbra
+                        (its size above ``MIN_PENUMBRA_SIZE`` x the scene's extent); points,
+                        spots and suns cast hard shadows with one ray and need none
     specular            some material has specular reflectance
     ==================  ==========================================================================
 
@@ -130,7 +131,8 @@ def make_plan(scene, settings, lights, arrays) -> Plan:
 
     # shadow photons
     positioned = [light for light in lights.sampled if getattr(light, "kind", "") in ("mesh", "area")]
-    large = [light for light in positioned
+    enabled = [light for light in positioned if getattr(light, "shadow_photons", True)]
+    large = [light for light in enabled
              if _light_size(light) > MIN_PENUMBRA_SIZE * max(scene.extent, 1e-30)]
     if not full:
         plan.set("shadow_photons", False, "photon-map mode traces no shadow rays")
@@ -139,10 +141,14 @@ def make_plan(scene, settings, lights, arrays) -> Plan:
     elif not positioned:
         plan.set("shadow_photons", False, "no area light or emissive mesh (points, spots and "
                                           "suns need one shadow ray each)")
+    elif not enabled:
+        plan.set("shadow_photons", False, "every eligible light has shadow photons off")
     elif not large:
         plan.set("shadow_photons", False, "area lights too small to cast a visible penumbra")
     else:
-        plan.set("shadow_photons", True, f"{len(large)} area/mesh light(s) with penumbrae")
+        off = len(positioned) - len(enabled)
+        plan.set("shadow_photons", True, f"{len(large)} area/mesh light(s) with penumbrae"
+                 + (f"; {off} with shadow photons off" if off else ""))
     if "shadow_photons" in force and not plan["shadow_photons"]:
         plan.set("shadow_photons", True, "forced on (the planner would skip it)")
 

@@ -171,6 +171,9 @@ class AreaLight:
     diameters for disk and ellipse) before the matrix's scale, which is applied. ``power`` [W]
     per channel gives radiance L = P / (pi A). ``collimated`` marks Blender's Spread ~ 0: the
     seed's circular directional light (Eq. 7.2), all light along the normal.
+    ``shadow_photons`` False keeps shadow photons (seed 7.2, 9.6) from leaving this light:
+    its points are not classified and every shadow ray to it is traced (Blender's
+    ``Light.lanterna.shadow_photons``).
     """
 
     name: str
@@ -181,9 +184,11 @@ class AreaLight:
     power: np.ndarray
     collimated: bool = False
     photon_share: float = 1.0
+    shadow_photons: bool = True
 
     def __post_init__(self):
         self.photon_share = _share(self.photon_share, self.name)
+        self.shadow_photons = bool(self.shadow_photons)
         self.matrix = np.asarray(self.matrix, dtype=np.float64).reshape(4, 4)
         if not np.all(np.isfinite(self.matrix)):
             raise SceneError(f"{self.name}: transform is not finite")

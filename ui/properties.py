@@ -1,15 +1,24 @@
 """Lanterna's settings as Blender PropertyGroups.
 
-``Scene.lanterna``     render settings (sampling); the exporter (``engine/blender/export.py``)
-                       is the only reader that turns them into ``pipeline.RenderSettings``.
+``Scene.lanterna``     render settings (sampling, photons, indirect light: final gather and
+                       irradiance cache, shadow photons); the exporter
+                       (``engine/blender/export.py``) is the only reader that turns them into
+                       ``pipeline.RenderSettings``.
 ``Material.lanterna``  the seed's three radiometric properties (section 3.2): diffuse
                        reflectance rho_d, specular reflectance rho_s (both per RGB channel, in
                        [0, 1]) and radiant exitance M [W/m^2]; by default derived from the
                        material's node tree instead.
-``Light.lanterna``     per-light settings for the photon stages (a later issue).
+``Light.lanterna``     per-light settings for the photon stages: the light's share of the
+                       photon budget and whether shadow photons (seed 7.2, 9.6) leave it.
 
 Every property carries a description, limits and a subtype. Names are part of the contract
-with the exporter: do not rename them.
+with the exporter: a ``Scene.lanterna`` property whose name is a field of
+``pipeline.RenderSettings`` reaches the core under that name (``export.export_settings``);
+``Light.lanterna`` is read by ``export.export_scene``. Do not rename them.
+``use_irradiance_cache`` stores nothing: it reads and writes ``indirect`` (on: ``CACHE``; off:
+``GATHER``), so that the Irradiance Cache panel can carry its switch in its header as Cycles'
+panels do. Material and light properties tag their data block when they change, so that an
+evaluated depsgraph (viewport, scripts) sees the new value; F12 builds a fresh one anyway.
 """
 
 import bpy
@@ -19,8 +28,24 @@ from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorPro
 INT_MAX = 2 ** 31 - 1
 
 
+def _tag_owner(self, _context) -> None:
+    """Tag the data block that owns the group, so that an evaluated depsgraph (which the
+    exporter reads) sees the new value; Blender does not do it for add-on properties."""
+    self.id_data.update_tag()
+
+
+def _get_use_cache(self) -> bool:
+    return self.indirect == 'CACHE'
+
+
+def _set_use_cache(self, value: bool) -> None:
+    if bool(value) != (self.indirect == 'CACHE'):
+        self.indirect = 'CACHE' if value else 'GATHER'
+
+
 class LanternaSceneSettings(bpy.types.PropertyGroup):
-    """Render settings of one scene (Properties editor > Render > Sampling, Photons)."""
+    """Render settings of one scene (Properties editor > Render: Sampling, Photons, Indirect
+    Light, Shadow Photons)."""
 
     mode: EnumProperty(
         name="Mode",
@@ -117,6 +142,20 @@ class LanternaSceneSettings(bpy.types.PropertyGroup):
         description="Irradiance cache: largest error a; records are used where w > 1/a (Eq. 10.3)",
         default=0.2, min=0.01, max=10.0, soft_max=1.0, precision=3, subtype='NONE',
     )
+    cache_gradients: BoolProperty(
+        name="Gradients",
+        description=("Irradiance cache: extrapolate each record with its rotation and "
+                     "translation gradients (Ward and Heckbert 1992, Eq. 10.5); off: plain "
+                     "weighted average of the records"),
+        default=True,
+    )
+    use_irradiance_cache: BoolProperty(
+        name="Irradiance Cache",
+        description=("Interpolate the final gather between cached records (Indirect = "
+                     "Irradiance Cache); off: a final gather at every looked-up sample "
+                     "(Indirect = Final Gather)"),
+        get=_get_use_cache, set=_set_use_cache,
+    )
     shadow_photons: BoolProperty(
         name="Shadow Photons",
         description="Classify lit, penumbra and umbra with shadow photons to save shadow rays",
@@ -148,23 +187,23 @@ class LanternaMaterialSettings(bpy.types.PropertyGroup):
         name="Derive from Nodes",
         description=("Take reflectances and exitance from the material's node tree (Principled, "
                      "Diffuse, Glossy, Emission); off: use the values below"),
-        default=True,
+        default=True, update=_tag_owner,
     )
     diffuse: FloatVectorProperty(
         name="Diffuse",
         description="Diffuse (Lambertian) reflectance rho_d per channel; BRDF rho_d / pi",
-        size=3, default=(0.8, 0.8, 0.8), min=0.0, max=1.0, subtype='COLOR',
+        size=3, default=(0.8, 0.8, 0.8), min=0.0, max=1.0, subtype='COLOR', update=_tag_owner,
     )
     specular: FloatVectorProperty(
         name="Specular",
         description="Perfect-mirror reflectance rho_s per channel",
-        size=3, default=(0.0, 0.0, 0.0), min=0.0, max=1.0, subtype='COLOR',
+        size=3, default=(0.0, 0.0, 0.0), min=0.0, max=1.0, subtype='COLOR', update=_tag_owner,
     )
     exitance: FloatVectorProperty(
         name="Exitance",
         description="Radiant exitance M in W/m² per channel (radiance L = M / pi per side)",
         size=3, default=(0.0, 0.0, 0.0), min=0.0, max=1.0e9, soft_max=1000.0,
-        precision=3, subtype='NONE',
+        precision=3, subtype='NONE', update=_tag_owner,
     )
 
 
@@ -176,6 +215,14 @@ class LanternaLightSettings(bpy.types.PropertyGroup):
         description=("Relative weight of this light when the photon budget is split between "
                      "lights (1 = in proportion to its power)"),
         default=1.0, min=0.0, max=1000.0, soft_max=10.0, subtype='NONE',
+        update=_tag_owner,
+    )
+    shadow_photons: BoolProperty(
+        name="Shadow Photons",
+        description=("Send shadow photons from this area light to classify points as lit, "
+                     "penumbra or umbra (seed 9.6); off: every shadow ray to it is traced. "
+                     "Point, spot and sun lights always use one shadow ray"),
+        default=True, update=_tag_owner,
     )
 
 

@@ -23,7 +23,8 @@ animation already applied by Blender) and turns it into the renderer's inert sce
   without slots share a default grey diffuse of rho_d = 0.8): when the material has a
   ``lanterna`` property group with ``derive_from_nodes`` False, its ``diffuse``, ``specular``
   and ``exitance`` are used as they are. Otherwise they are derived from the node tree feeding
-  the active Material Output's Surface:
+  the active Material Output's Surface (:func:`material_from_nodes`, also what the Material
+  panel shows):
 
   - Principled BSDF: rho_d = Base Color (1 - Metallic)(1 - Transmission Weight),
     rho_s = Base Color x Metallic (a perfect mirror, whatever the Roughness), exitance
@@ -58,6 +59,8 @@ animation already applied by Blender) and turns it into the renderer's inert sce
     < 1e-3 rad; other spreads below 180 deg are reported and treated as 180 deg.
   - Zero power is skipped silently; negative power is skipped with a warning; light node trees
     are reported (once per light) and ignored.
+  - ``Light.lanterna``: ``photon_share`` goes onto every light; ``shadow_photons`` onto area
+    lights (the only ones shadow photons leave).
 * **World**: a uniform environment of radiance = Background Color x Strength
   [W m^-2 sr^-1] (Mix/Add shaders of backgrounds are combined); a linked Color or Strength is
   reported and its default used; no world is black. A new World in Blender 5 is grey 0.05 and
@@ -112,7 +115,7 @@ from ..pipeline import RenderSettings
 from ..scene import (AREA_SHAPES, AreaLight, Camera, Material, PointLight, Scene, SceneError,
                      SpotLight, SunLight, World)
 
-__all__ = ["export_scene", "export_settings", "benchmark_export"]
+__all__ = ["export_scene", "export_settings", "material_from_nodes", "benchmark_export"]
 
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
 UNSUPPORTED_TYPES = {"CURVES", "POINTCLOUD", "VOLUME", "GREASEPENCIL", "GPENCIL"}
@@ -478,7 +481,17 @@ def _convert_material(mat, warn: _Warnings) -> Material:
         e = getattr(props, "exitance", (0.0, 0.0, 0.0))
         d, s, e = _clamp_reflectances(name, d[:3], s[:3], e[:3], warn)
         return Material(name, diffuse=d, specular=s, exitance=e)
+    return material_from_nodes(mat, warn)
 
+
+def material_from_nodes(mat, warn=None) -> Material:
+    """The :class:`Material` derived from ``mat``'s node tree (or its viewport colour when it
+    has none), whatever its ``derive_from_nodes`` says: the rules of the module docstring,
+    clamped as the render clamps them. ``warn`` (a callable taking a message; default: the
+    messages are dropped) receives what the derivation had to approximate. The Material
+    panel shows these values read-only."""
+    warn = warn if warn is not None else _Warnings()
+    name = mat.name
     tree = mat.node_tree
     with _py_warnings.catch_warnings():   # Material.use_nodes is deprecated in Blender 5
         _py_warnings.simplefilter("ignore", DeprecationWarning)
@@ -795,6 +808,8 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
                 settings = getattr(obj.data, "lanterna", None)
                 if settings is not None:
                     light.photon_share = float(settings.photon_share)
+                    if isinstance(light, AreaLight):   # the only lights shadow photons leave
+                        light.shadow_photons = bool(getattr(settings, "shadow_photons", True))
                 lights.append(light)
         elif otype == "MESH":
             if parent is not None:
