@@ -459,6 +459,37 @@ class IrradianceCache:
         self._geo = self._val = None
         return np.arange(sl.start, sl.stop)
 
+    # persistence (engine/artifacts.py) -------------------------------------------------
+    ARRAY_FIELDS = ("positions", "normals", "irradiance", "radius", "rot_grad", "trans_grad",
+                    "usage")
+
+    def to_arrays(self) -> dict:
+        """The records as named numpy arrays (float64, usage int64) and the options as 0-d
+        arrays; ``np.load(allow_pickle=False)`` reads them back."""
+        out = {key: np.ascontiguousarray(getattr(self, key)) for key in self.ARRAY_FIELDS}
+        out.update(channels=np.array(self.channels), index=np.array(self.index),
+                   radius_ratio=np.array(self.radius_ratio), e_min=np.array(self.e_min),
+                   cell_fraction=np.array(self.cell_fraction))
+        return out
+
+    @classmethod
+    def from_arrays(cls, arrays) -> "IrradianceCache":
+        """The inverse of ``to_arrays``: the same records bit for bit (normals are not
+        normalised again, as ``add`` would), usage counters included."""
+        cache = cls(channels=int(arrays["channels"]), index=str(arrays["index"]),
+                    radius_ratio=float(arrays["radius_ratio"]), e_min=float(arrays["e_min"]),
+                    cell_fraction=float(arrays["cell_fraction"]))
+        n = len(np.asarray(arrays["radius"]))
+        cache._alloc(n)
+        for name, key in (("_pos", "positions"), ("_nrm", "normals"), ("_E", "irradiance"),
+                          ("_R", "radius"), ("_grot", "rot_grad"), ("_gtr", "trans_grad")):
+            getattr(cache, name)[:] = np.asarray(arrays[key], np.float64).reshape(
+                getattr(cache, name).shape)
+        cache._used[:] = np.asarray(arrays["usage"], np.int64)
+        cache._H[:] = np.cross(cache._grot, cache._nrm[:, None, :])
+        cache._n = n
+        return cache
+
     # index ------------------------------------------------------------------------------
     def _radius_classes(self):
         if self._classes is None:

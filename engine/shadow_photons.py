@@ -6,13 +6,16 @@ shadows using the photon map")
     sampled lights that have a position (``lights.sampled`` entries that are
     ``TriangleEmitter``: square / rectangle area lights and emissive meshes, or
     ``EllipseEmitter``: disk / ellipse area lights; suns with an angle and the world keep plain
-    shadow rays). Emission is that of the photon map for area lights: an area-uniform point
-    (triangle by area with ``searchsorted``, the seed's "area line"; the concentric map for
-    disks) and a cosine direction about the emitting side (a random side of a two-sided
-    emissive mesh). Each photon is traced THROUGH every surface along its line: the first hit
-    is stored as "direct", every later hit as "shadow" (the number of surfaces crossed is
-    kept), tagged with the index of its light in ``lights.sampled``. Nothing bounces: the map
-    holds visibility, not energy.
+    shadow rays). A light whose ``shadow_photons`` flag is off (``AreaLight.shadow_photons``,
+    Blender's ``Light.lanterna.shadow_photons``, carried onto its emitter by ``LightSet``)
+    sends none: the map does not cover it (``covers`` is False), so ``engine/direct.py`` traces
+    all of its shadow rays. Emission is that of the photon map for area lights: an
+    area-uniform point (triangle by area with ``searchsorted``, the seed's "area line"; the
+    concentric map for disks) and a cosine direction about the emitting side (a random side of
+    a two-sided emissive mesh). Each photon is traced THROUGH every surface along its line:
+    the first hit is stored as "direct", every later hit as "shadow" (the number of surfaces
+    crossed is kept), tagged with the index of its light in ``lights.sampled``. Nothing
+    bounces: the map holds visibility, not energy.
 
     ``ShadowPhotonMap.classify(points, normals, light_index)`` -> int8 classes
     ``LIT`` = 0 (the whole light is visible: visibility 1, no shadow ray), ``UMBRA`` = 1
@@ -290,6 +293,49 @@ class ShadowPhotonMap:
         """True when light ``light_index`` has photons: its points can be classified."""
         return int(light_index) in self._rep_trees
 
+    # Persistence (engine/artifacts.py) ----------------------------------------------------
+    ARRAY_FIELDS = ("positions", "directions", "light", "crossings", "rep_index", "rep_class",
+                    "rep_radius")
+    SCALAR_FIELDS = ("k", "margin", "disc", "penumbra_factor", "lookup_k")
+
+    def to_arrays(self) -> dict:
+        """The map as named numpy arrays (``np.load(allow_pickle=False)`` reads them back):
+        the photon and representative arrays with their dtypes, the per-light dicts as key /
+        value arrays (``slices.keys`` (L,) int64, ``slices.values`` (L, 2) int64; ``radius``,
+        ``rep_slices`` alike), the scalar options as 0-d arrays and ``stats`` as JSON."""
+        from .artifacts import pack_json
+        out = {key: np.ascontiguousarray(getattr(self, key)) for key in self.ARRAY_FIELDS}
+        for name in ("slices", "rep_slices"):
+            table = getattr(self, name)
+            out[name + ".keys"] = np.array(sorted(table), np.int64)
+            out[name + ".values"] = np.array([table[li] for li in sorted(table)],
+                                             np.int64).reshape(-1, 2)
+        out["radius.keys"] = np.array(sorted(self.radius), np.int64)
+        out["radius.values"] = np.array([self.radius[li] for li in sorted(self.radius)], np.float64)
+        for key in self.SCALAR_FIELDS:
+            out[key] = np.array(getattr(self, key))
+        out["stats"] = pack_json(self.stats)
+        return out
+
+    @classmethod
+    def from_arrays(cls, arrays, build: bool = True) -> "ShadowPhotonMap":
+        """The inverse of ``to_arrays``; ``build`` makes the kd-trees (``build_trees``)."""
+        from .artifacts import unpack_json
+        smap = cls(*(np.asarray(arrays[key]) for key in cls.ARRAY_FIELDS[:4]))
+        for key in cls.ARRAY_FIELDS[4:]:
+            setattr(smap, key, np.asarray(arrays[key]))
+        for name in ("slices", "rep_slices"):
+            keys, values = np.asarray(arrays[name + ".keys"]), np.asarray(arrays[name + ".values"])
+            setattr(smap, name, {int(li): (int(a), int(b)) for li, (a, b) in zip(keys, values)})
+        smap.radius = {int(li): float(r) for li, r in zip(np.asarray(arrays["radius.keys"]),
+                                                           np.asarray(arrays["radius.values"]))}
+        for key in cls.SCALAR_FIELDS:
+            setattr(smap, key, type(getattr(smap, key))(np.asarray(arrays[key]).item()))
+        smap.stats = unpack_json(arrays["stats"])
+        if build:
+            smap.build_trees()
+        return smap
+
     def build_trees(self):
         """A pykdtree (leafsize 16) over each light's photons and one over its representatives."""
         from pykdtree.kdtree import KDTree
@@ -464,7 +510,8 @@ def build_shadow_photon_map(scene, accel, lights, count: int = 0, seed: int = 0,
     in chunks when given), store and index them, and classify every ``rep_stride``-th photon
     from its neighbours. ``max_radius`` [m] caps every light's neighbourhood (0: automatic).
 
-    ``stats``: photons per light (by index and name), stored direct / shadow counts, rays,
+    ``stats``: photons per light (by index and name), the names of the positioned lights whose
+    ``shadow_photons`` is off (``lights_switched_off``), stored direct / shadow counts, rays,
     dropped photons, bytes and bytes per photon, representatives per class, emit / trace /
     index / build seconds; ``classify`` adds classified counts per class and seconds."""
     t_start = time.perf_counter()
@@ -477,10 +524,14 @@ def build_shadow_photon_map(scene, accel, lights, count: int = 0, seed: int = 0,
         count = auto_shadow_photon_count(scene, k, margin)
     count = int(count)
     chosen = [(li, light) for li, light in enumerate(lights.sampled)
-              if positioned(light) and _luminance_flux(light) > 0]
+              if positioned(light) and getattr(light, "shadow_photons", True)
+              and _luminance_flux(light) > 0]
+    switched_off = [light.name for light in lights.sampled
+                    if positioned(light) and not getattr(light, "shadow_photons", True)]
     smap = empty_map(**options)
     smap.stats.update({"requested": count, "emitted": 0, "stored": 0, "stored_direct": 0,
                        "stored_shadow": 0, "photons_per_light": {}, "lights": {},
+                       "lights_switched_off": switched_off,
                        "rays": 0, "dropped": 0, "bytes": 0, "bytes_per_photon": 16.0,
                        "representatives": 0, "k": k, "margin": margin,
                        "neighbours": neighbours_queried(k, margin), "rep_stride": rep_stride})
