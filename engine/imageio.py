@@ -116,11 +116,13 @@ def write_exr(path, image, extra_channels=None, attributes=None) -> None:
 
 
 def read_exr(path) -> dict[str, np.ndarray]:
-    """Every channel of an OpenEXR file as ``{name: (H, W) float32}`` (row 0 = top)."""
+    """Every channel of an OpenEXR file as ``{name: (H, W) float32}`` (row 0 = top), from
+    every part of a multi-part file (Blender writes each pass of a multilayer EXR as a part)."""
     import OpenEXR
 
     with OpenEXR.File(os.fspath(path), separate_channels=True) as f:
-        return {name: np.array(ch.pixels, dtype=np.float32) for name, ch in f.channels().items()}
+        return {name: np.array(ch.pixels, dtype=np.float32)
+                for part in f.parts for name, ch in part.channels.items()}
 
 
 def read_exr_rgb(path, layer: str | None = None) -> np.ndarray:

@@ -181,6 +181,7 @@ class RenderResult:
     passes: dict = field(default_factory=dict)
     report: dict = field(default_factory=dict)
     cancelled: bool = False
+    artifacts: object = None               # engine.artifacts.Artifacts: the maps it used
 
 
 class _SceneArrays:
@@ -234,6 +235,7 @@ class _CachedIndirect:
         e, covered, _w, _count = self.cache.interpolate(x, ns, self.a,
                                                         use_gradients=self.use_gradients)
         stats["cache_interpolated"] = stats.get("cache_interpolated", 0) + int(covered.sum())
+        stats["covered_mask"] = covered          # taken by the batch for the Cache usage pass
         if not covered.all():
             rest = np.nonzero(~covered)[0]
             e[rest] = self.gather.irradiance(x[rest], ns[rest], ng[rest], rng, stats)
@@ -381,8 +383,13 @@ class _FinalGather:
 
 def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArrays,
                         accel: Accelerator, lights: LightSet, settings: RenderSettings,
-                        ray_log: list | None, photon=None, shadow_map=None):
-    """Radiance for the pixels of one batch: (pixels, 3) mean over their samples."""
+                        ray_log: list | None, photon=None, shadow_map=None,
+                        track_usage: bool = False):
+    """Radiance for the pixels of one batch, mean over their samples, by kind: (3, pixels, 3)
+    for emission (surfaces and the world seen from the camera or in mirrors), direct light
+    and indirect light (in ``photon-map`` mode: the whole estimate); their sum is Combined.
+    Also the batch's counters and, with ``track_usage``, (pixels, 2) shares of samples
+    interpolated from cache records and gathered afresh."""
     stats = dict.fromkeys(BATCH_COUNTERS, 0)
     stats["seconds"] = 0.0
     direct_light = settings.mode == "full"
@@ -392,8 +399,12 @@ def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArr
     spp = settings.samples
     origins, directions, tmax = pixel_rays(scene.camera, p0, p1, spp, rng, settings.filter_width)
     count = len(origins)
-    # Sums of the samples' radiance per pixel: every contribution goes straight to its pixel.
-    pixel_sums = np.zeros((p1 - p0, 3))
+    # Sums of the samples' radiance per pixel, by kind (the Emission, Direct and Indirect
+    # passes; Combined is their sum): every contribution goes straight to its pixel.
+    parts = np.zeros((3, p1 - p0, 3))
+    emission_sums, direct_sums, indirect_sums = parts
+    # Cache usage pass: per pixel, samples interpolated from records and samples gathered.
+    usage = np.zeros((p1 - p0, 2)) if track_usage else None
     throughput = np.ones((count, 3), np.float32) if arrays.has_specular else None
     ray_of = np.arange(count)
     world = scene.world.radiance
@@ -413,7 +424,7 @@ def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArr
         if not all_hit and not scene.world.is_black:
             missed = np.broadcast_to(world, (int((~hit).sum()), 3)) if throughput is None \
                 else throughput[~hit] * world
-            _add_to_pixels(pixel_sums, ray_of[~hit] // spp, missed)
+            _add_to_pixels(emission_sums, ray_of[~hit] // spp, missed)
         if not hit.any():
             break
         if not all_hit:
@@ -432,7 +443,7 @@ def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArr
 
         if arrays.has_emission:
             emitted = arrays.emitted_radiance[mat] * (front | arrays.both_sides[mat])[:, None]
-            _add_to_pixels(pixel_sums, pixel_of, emitted if thr is None else thr * emitted)
+            _add_to_pixels(emission_sums, pixel_of, emitted if thr is None else thr * emitted)
 
         diffuse = arrays.is_diffuse[mat]
         if diffuse.all():
@@ -453,10 +464,15 @@ def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArr
                 t0 = time.perf_counter()
                 e = photon.irradiance(x[ask], ns[ask], ng[ask], rng, stats)
                 stats["estimate_seconds"] += time.perf_counter() - t0
+                covered = stats.pop("covered_mask", None)
+                if usage is not None and covered is not None:
+                    owner = rays[ask] // spp
+                    usage[:, 0] += np.bincount(owner[covered], minlength=len(usage))
+                    usage[:, 1] += np.bincount(owner[~covered], minlength=len(usage))
                 e *= arrays.diffuse_over_pi[mat[ask]] * (spp / min(photon.lookups, spp))
                 if depth > 0:
                     e *= thr[ask]
-                _add_to_pixels(pixel_sums, rays[ask] // spp, e)
+                _add_to_pixels(indirect_sums, rays[ask] // spp, e)
         if idx is not None and direct_light:
             shadow_stats = {}
             terms = direct_terms(x[idx], ns[idx], lights, accel, rng, settings.light_samples,
@@ -472,21 +488,21 @@ def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArr
                 # Outgoing radiance rho_d / pi * E, summed per pixel: a (pixel, material)
                 # histogram of each term's scalar weights times the materials' rho_d / pi * rgb.
                 if pixel_of is None:
-                    key = np.repeat(np.arange(len(pixel_sums), dtype=np.int32) * materials, spp)[idx]
+                    key = np.repeat(np.arange(len(direct_sums), dtype=np.int32) * materials, spp)[idx]
                 else:
                     key = pixel_of[idx] * materials
                 key += mat_d
                 for target, scalar, rgb in terms:
                     hist = np.bincount(key if target is None else key[target], weights=scalar,
-                                       minlength=len(pixel_sums) * materials)
-                    pixel_sums += hist.reshape(-1, materials) @ (arrays.diffuse_over_pi * rgb)
+                                       minlength=len(direct_sums) * materials)
+                    direct_sums += hist.reshape(-1, materials) @ (arrays.diffuse_over_pi * rgb)
             elif terms:
                 e = irradiance_from_terms(terms, len(mat_d))
                 e *= arrays.diffuse_over_pi[mat_d]
                 if depth > 0:
                     e *= thr[idx]
                 in_order_d = pixel_of is None and isinstance(idx, slice)
-                _add_to_pixels(pixel_sums, None if in_order_d else (rays // spp)[idx], e)
+                _add_to_pixels(direct_sums, None if in_order_d else (rays // spp)[idx], e)
 
         if not arrays.has_specular or depth == settings.max_specular_depth:
             break
@@ -503,17 +519,50 @@ def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArr
         throughput = thr[idx] * rho_s[idx]
         ray_of = rays[idx]
 
-    pixels = pixel_sums / spp
+    parts /= spp
+    if usage is not None:
+        usage /= spp
     stats["seconds"] = time.perf_counter() - started
-    return pixels, stats
+    return parts, stats, usage
 
 
-def render(scene: Scene, settings: RenderSettings | None = None, progress=None, cancelled=None,
-           ray_log: list | None = None) -> RenderResult:
-    """Render ``scene``. ``progress(fraction, text)`` is called between batches and
-    ``cancelled()`` polled there (return True to stop early). ``ray_log``, when a list,
-    receives every traced batch of rays (benchmarks re-trace them with raw Embree)."""
-    settings = (settings or RenderSettings()).resolved().validate()
+def _photon_stage_entry(s: dict, settings, radius, lookups, seconds_key=True) -> dict:
+    """The report's ``photons`` stage entry from a photon map's stats (missing keys: 0)."""
+    g = s.get
+    return dict(requested=g("requested", 0), emitted=g("emitted", 0), stored=g("stored", 0),
+                stored_all=g("stored_all", 0), kept=g("kept", ""),
+                photons_per_light=g("photons_per_light", {}), photon_rays=g("rays", 0),
+                flux_emitted=g("flux_emitted", [0, 0, 0]),
+                flux_absorbed=g("flux_absorbed", [0, 0, 0]),
+                flux_escaped=g("flux_escaped", [0, 0, 0]),
+                flux_capped=g("flux_capped", [0, 0, 0]), capped_paths=g("capped_paths", 0),
+                flux_stored_direct=g("flux_stored_direct", [0, 0, 0]),
+                flux_stored_indirect=g("flux_stored_indirect", [0, 0, 0]),
+                map_bytes=g("bytes", 0), bytes_per_photon=g("bytes_per_photon", 0),
+                kd_tree=g("library"), emit_seconds=round(g("emit_seconds", 0.0), 6),
+                trace_seconds=round(g("trace_seconds", 0.0), 6),
+                build_seconds=round(g("build_seconds", 0.0), 6),
+                k=settings.photon_k, max_radius_m=radius,
+                radius_automatic=not settings.photon_radius, filter=settings.photon_filter,
+                max_bounces=settings.bounces, lookups_per_pixel=lookups)
+
+
+class _Prepared:
+    """Everything the stages before the camera made: the shared state of ``render`` and
+    ``bake``."""
+
+    def __init__(self, **kw):
+        self.__dict__.update(kw)
+
+    def close(self):
+        self.pool.shutdown(wait=True, cancel_futures=True)
+        self.accel.close()
+
+
+def _prepare(scene: Scene, settings: RenderSettings, progress, cancelled, artifacts) -> _Prepared:
+    """Stages 1-7 (validate ... irradiance cache, shadow photons). ``artifacts``: maps made
+    before (``bake`` or a loaded file) for this scene and these settings, used instead of
+    building them again."""
     total_start = time.perf_counter()
     report = {"seed": settings.seed, "settings": asdict(settings), "stages": {}, "warnings": []}
     stages = report["stages"]
@@ -530,6 +579,14 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
     scene.validate()
     report["warnings"].extend(scene.warnings)
     stage("validate", time.perf_counter() - t0, triangles=int(len(scene.triangles)))
+    fingerprint = None
+    if artifacts is not None:
+        from .artifacts import scene_fingerprint
+        fingerprint = scene_fingerprint(scene, settings)
+        if fingerprint != artifacts.fingerprint:
+            raise SceneError("Baked maps: they were made for another scene or other settings "
+                             "(geometry, lights, camera or map settings changed); bake again "
+                             "or clear them")
     # 2. accel_build (single-threaded queries: parallelism is across batches)
     tell(0.0, "Building the BVH")
     accel = Accelerator(scene.triangles, threads=1)
@@ -547,51 +604,54 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
     pixel_count = width * height
     arrays = _SceneArrays(scene)
     pool = ThreadPoolExecutor(settings.worker_count)
+    prep = _Prepared(report=report, stage=stage, tell=tell, accel=accel, lights=lights,
+                     arrays=arrays, pool=pool, pmap=None, photon=None, cache=None,
+                     shadow_map=None, radius=None, cone=None, was_cancelled=False,
+                     total_start=total_start, fingerprint=fingerprint,
+                     reused=artifacts is not None)
+    try:
+        _prepare_maps(prep, scene, settings, cancelled, artifacts, pixel_count)
+    except BaseException:
+        prep.close()
+        raise
+    return prep
 
+
+def _prepare_maps(prep: _Prepared, scene, settings, cancelled, artifacts, pixel_count):
+    """Stages 4-7 of ``_prepare``: the plan, photons, estimates, cache, shadow photons."""
+    report, stage, tell = prep.report, prep.stage, prep.tell
+    accel, lights, arrays, pool = prep.accel, prep.lights, prep.arrays, prep.pool
     # 4. the plan: which stages this scene needs, and why (engine/plan.py)
-    photon, pmap, cache = None, None, None
     plan = make_plan(scene, settings, lights, arrays)
+    prep.plan = plan
     report["plan"] = {"mode": settings.mode, "indirect": settings.indirect,
                       "stages": plan.to_report(), "summary": plan.summary()}
-    reason = plan.reasons["photons"]
     if plan["photons"]:
-        count = settings.photons or auto_photon_count(pixel_count)
-        tell(0.0, f"Photons: tracing {count:,}")
-        t0 = time.perf_counter()
-        try:
+        lookups = settings.photon_lookups or auto_lookups(pixel_count, settings.samples)
+        if artifacts is not None and artifacts.photon_map is not None:
+            pmap, photon_seconds = artifacts.photon_map, 0.0
+        else:
+            count = settings.photons or auto_photon_count(pixel_count)
+            tell(0.0, f"Photons: tracing {count:,}")
+            t0 = time.perf_counter()
             pmap = build_photon_map(
                 scene, accel, count, seed=settings.seed, max_bounces=settings.bounces,
                 keep="indirect" if settings.mode == "full" and not plan["final_gather"] else "all",
                 pool=pool,
                 progress=lambda f: tell(0.0, f"Photons: {f:.0%} of {count:,} traced"),
                 cancelled=cancelled)
-        except BaseException:
-            pool.shutdown(wait=True, cancel_futures=True)
-            accel.close()
-            raise
-        photon_seconds = time.perf_counter() - t0
+            photon_seconds = time.perf_counter() - t0
+        prep.pmap = pmap
         radius = settings.photon_radius or auto_max_radius(scene, len(pmap), settings.photon_k)
-        lookups = settings.photon_lookups or auto_lookups(pixel_count, settings.samples)
+        prep.radius = radius
         s = pmap.stats
-        stage("photons", photon_seconds, requested=s["requested"], emitted=s["emitted"],
-              stored=s["stored"], stored_all=s["stored_all"], kept=s["kept"],
-              photons_per_light=s["photons_per_light"], photon_rays=s.get("rays", 0),
-              flux_emitted=s["flux_emitted"], flux_absorbed=s.get("flux_absorbed", [0, 0, 0]),
-              flux_escaped=s.get("flux_escaped", [0, 0, 0]),
-              flux_capped=s.get("flux_capped", [0, 0, 0]), capped_paths=s.get("capped_paths", 0),
-              flux_stored_direct=s["flux_stored_direct"],
-              flux_stored_indirect=s["flux_stored_indirect"],
-              map_bytes=s["bytes"], bytes_per_photon=s["bytes_per_photon"],
-              kd_tree=s.get("library"), emit_seconds=round(s["emit_seconds"], 6),
-              trace_seconds=round(s["trace_seconds"], 6),
-              build_seconds=round(s.get("build_seconds", 0.0), 6),
-              k=settings.photon_k, max_radius_m=radius, radius_automatic=not settings.photon_radius,
-              filter=settings.photon_filter, max_bounces=settings.bounces,
-              lookups_per_pixel=lookups)
+        stage("photons", photon_seconds, **_photon_stage_entry(s, settings, radius, lookups),
+              reused=artifacts is not None)
         cone = CONE_FILTER_K if settings.photon_filter == "cone" else None
+        prep.cone = cone
         if not plan["final_gather"]:
-            photon = _PhotonEstimate(pmap, settings.photon_k, radius,
-                                     1 if settings.mode == "full" else 0, cone, lookups)
+            prep.photon = _PhotonEstimate(pmap, settings.photon_k, radius,
+                                          1 if settings.mode == "full" else 0, cone, lookups)
         else:
             tell(0.0, "Precomputing irradiance at photons")
             estimates = RadianceEstimates.build(pmap, k=settings.photon_k, max_radius=radius,
@@ -600,18 +660,26 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
                   estimates=estimates.stats["estimates"], bytes=estimates.stats.get("bytes", 0))
             photon = _FinalGather(estimates, accel, arrays, settings.gather_m, settings.gather_n,
                                   lookups, pmap, settings.gather_guided)
+            prep.photon = photon
             if plan["irradiance_cache"]:
                 t0 = time.perf_counter()
-                cache, cache_stats = _cache_prepass(scene, accel, arrays, photon, settings, pool,
-                                                    tell, cancelled)
+                if artifacts is not None and artifacts.cache is not None:
+                    cache = artifacts.cache
+                    cache.usage[:] = 0
+                    cache_stats = {"records": len(cache), "passes": []}
+                else:
+                    cache, cache_stats = _cache_prepass(scene, accel, arrays, photon, settings,
+                                                        pool, tell, cancelled)
                 # Prebuild the spatial index once, before the batches share the cache.
                 cache.interpolate(np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]),
                                   settings.cache_error, count_usage=False)
                 stage("irradiance_cache", time.perf_counter() - t0, records=cache_stats["records"],
                       passes=cache_stats["passes"], cache_error=settings.cache_error,
-                      gather=f"{settings.gather_m}x{settings.gather_n}")
-                photon = _CachedIndirect(cache, settings.cache_error, photon, lookups,
-                                         settings.cache_gradients)
+                      gather=f"{settings.gather_m}x{settings.gather_n}",
+                      reused=artifacts is not None)
+                prep.cache = cache
+                prep.photon = _CachedIndirect(cache, settings.cache_error, photon, lookups,
+                                              settings.cache_gradients)
         for light in scene.lights:
             if getattr(light, "photon_share", 1.0) == 0:
                 report["warnings"].append(f"Light '{light.name}': photon share 0, so it sends "
@@ -623,55 +691,166 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
                 "dropped (a very bright enclosure?)")
 
     # shadow photons: lit / umbra / penumbra classes for area and mesh lights (seed 9.6)
-    was_cancelled = bool(pmap is not None and pmap.stats["cancelled"])
-    shadow_map = None
-    if plan["shadow_photons"] and not was_cancelled:
-        from .shadow_photons import build_shadow_photon_map
-        tell(0.0, "Shadow photons")
+    prep.was_cancelled = bool(prep.pmap is not None and prep.pmap.stats.get("cancelled"))
+    if plan["shadow_photons"] and not prep.was_cancelled:
         t0 = time.perf_counter()
-        shadow_map = build_shadow_photon_map(scene, accel, lights, seed=settings.seed, pool=pool)
+        if artifacts is not None and artifacts.shadow_map is not None:
+            shadow_map = artifacts.shadow_map
+        else:
+            from .shadow_photons import build_shadow_photon_map
+            tell(0.0, "Shadow photons")
+            shadow_map = build_shadow_photon_map(scene, accel, lights, seed=settings.seed,
+                                                 pool=pool)
         s = shadow_map.stats
-        stage("shadow_photons", time.perf_counter() - t0,
+        stage("shadow_photons", time.perf_counter() - t0, reused=artifacts is not None,
               **{k: v for k, v in s.items() if isinstance(v, (int, float, str, list, dict))})
+        prep.shadow_map = shadow_map
+
+
+def _artifacts_of(prep: _Prepared, scene, settings):
+    from .artifacts import Artifacts, scene_fingerprint
+
+    fingerprint = prep.fingerprint or scene_fingerprint(scene, settings)
+    keep = ("photons", "radiance_estimates", "irradiance_cache", "shadow_photons")
+    return Artifacts(photon_map=prep.pmap, shadow_map=prep.shadow_map, cache=prep.cache,
+                     fingerprint=fingerprint, settings=asdict(settings),
+                     report={k: v for k, v in prep.report["stages"].items() if k in keep})
+
+
+def bake(scene: Scene, settings: RenderSettings | None = None, progress=None,
+         cancelled=None):
+    """Every stage but the camera: the photon map, the shadow photons and the irradiance
+    cache of ``scene`` with ``settings``, as ``engine.artifacts.Artifacts`` (for the viewport
+    overlays, to save next to the .blend, or to render with later: ``render(...,
+    artifacts=...)`` gives the same picture as a render that builds them itself)."""
+    settings = (settings or RenderSettings()).resolved().validate()
+    prep = _prepare(scene, settings, progress, cancelled, None)
+    try:
+        artifacts = _artifacts_of(prep, scene, settings)
+        artifacts.report["total_seconds"] = round(time.perf_counter() - prep.total_start, 6)
+        artifacts.report["plan"] = prep.report["plan"]
+        artifacts.report["cancelled"] = prep.was_cancelled
+    finally:
+        prep.close()
+    return artifacts
+
+
+def _centre_hits(scene: Scene, accel, arrays: _SceneArrays):
+    """First hits of one ray per window pixel through its centre (the diagnostic passes)."""
+    from .passes import CentreHits
+
+    width, height = scene.camera.window_size
+    origins, directions, tmax = pixel_rays(scene.camera, 0, width * height, 1,
+                                           np.random.default_rng(0), centres=True)
+    t_hit, prim, bu, bv = accel.intersect(origins, directions, tmax)
+    hit = np.nonzero(prim >= 0)[0]
+    t_hit, prim, bu, bv, d = t_hit[hit], prim[hit], bu[hit], bv[hit], directions[hit]
+    x = origins[hit] + t_hit[:, None] * d
+    ng, ns, _front = _surface_normals(arrays, prim, bu, bv, d)
+    mat = arrays.material_ids[prim]
+    return CentreHits(pixel=hit, x=x, ns=ns, ng=ng, material=mat,
+                      diffuse=arrays.is_diffuse[mat], shape=(height, width))
+
+
+def _diagnostic_passes(wanted, scene, settings, prep: _Prepared, usage) -> dict:
+    from . import passes as P
+
+    shape = scene.camera.window_size[::-1]
+    out = {}
+    hits = None
+    if {"PhotonMap", "ShadowClasses"} & set(wanted):
+        hits = _centre_hits(scene, prep.accel, prep.arrays)
+    if "PhotonMap" in wanted:
+        # All stored photons (in full mode with the photon map at the hit the map keeps only
+        # the photons that bounced, so the view shows indirect light there).
+        out["PhotonMap"] = P.photon_map_view(hits, prep.pmap, settings.photon_k,
+                                             prep.radius or np.inf, 0,
+                                             prep.arrays.diffuse_over_pi, prep.cone)
+    if "ShadowClasses" in wanted:
+        out["ShadowClasses"] = P.shadow_classes_image(hits, prep.shadow_map,
+                                                      range(len(prep.lights.sampled)))
+    if "Photons" in wanted:
+        out["Photons"] = P.photons_image(scene.camera, prep.accel, prep.pmap, shape)
+    if "CachePoints" in wanted:
+        out["CachePoints"] = P.cache_points_image(scene.camera, prep.accel, prep.cache, shape)
+    if "CacheUsage" in wanted:
+        out["CacheUsage"] = P.cache_usage_image(usage, shape)
+    return out
+
+
+def render(scene: Scene, settings: RenderSettings | None = None, progress=None, cancelled=None,
+           ray_log: list | None = None, passes=(), artifacts=None) -> RenderResult:
+    """Render ``scene``. ``progress(fraction, text)`` is called between batches and
+    ``cancelled()`` polled there (return True to stop early). ``ray_log``, when a list,
+    receives every traced batch of rays (benchmarks re-trace them with raw Embree).
+    ``passes``: pass names or ``--passes`` names (``engine/passes.py``) to return in
+    ``result.passes`` beside Combined. ``artifacts``: maps from ``bake`` (or a saved file)
+    for this scene and settings, used instead of building them again; the picture is the
+    same. ``result.artifacts`` holds the maps this render used."""
+    from .passes import parse_passes
+
+    settings = (settings or RenderSettings()).resolved().validate()
+    wanted = parse_passes(passes)
+    prep = _prepare(scene, settings, progress, cancelled, artifacts)
+    report, stage, tell = prep.report, prep.stage, prep.tell
+    stages = report["stages"]
+    accel, lights, arrays, pool = prep.accel, prep.lights, prep.arrays, prep.pool
+    photon, shadow_map, cache = prep.photon, prep.shadow_map, prep.cache
+    was_cancelled = prep.was_cancelled
+    width, height = scene.camera.window_size
+    pixel_count = width * height
 
     # 5. camera: batches of whole pixels over a thread pool
+    track_usage = "CacheUsage" in wanted and isinstance(photon, _CachedIndirect)
     batch_pixels = max(1, TARGET_BATCH_SAMPLES // settings.samples)
     ranges = [(p, min(p + batch_pixels, pixel_count)) for p in range(0, pixel_count, batch_pixels)]
     image = np.zeros((pixel_count, 3), np.float32)
+    split = [name for name in ("Emission", "Direct", "Indirect") if name in wanted]
+    kinds = {name: np.zeros((pixel_count, 3), np.float32) for name in split}
+    usage = np.zeros((pixel_count, 2)) if track_usage else None
     totals = dict.fromkeys(BATCH_COUNTERS, 0)
     totals["batch_seconds"] = 0.0
     t0 = time.perf_counter()
     done = 0
     label = "Rendering" if settings.mode == "full" else "Photon map"
     tell(0.0, f"{label}: 0/{len(ranges)} batches")
-    with pool:
-        pending = {}
-        queue = [] if was_cancelled else list(enumerate(ranges))
-        queue.reverse()
+    try:
+        with pool:
+            pending = {}
+            queue = [] if was_cancelled else list(enumerate(ranges))
+            queue.reverse()
 
-        def submit():
-            while queue and len(pending) < 2 * settings.worker_count:
-                batch, rng_ = queue.pop()
-                fut = pool.submit(_shade_camera_batch, batch, rng_, scene, arrays, accel, lights,
-                                  settings, ray_log, photon, shadow_map)
-                pending[fut] = rng_
+            def submit():
+                while queue and len(pending) < 2 * settings.worker_count:
+                    batch, rng_ = queue.pop()
+                    fut = pool.submit(_shade_camera_batch, batch, rng_, scene, arrays, accel,
+                                      lights, settings, ray_log, photon, shadow_map, track_usage)
+                    pending[fut] = rng_
 
-        submit()
-        while pending:
-            finished, _ = wait(list(pending), return_when=FIRST_COMPLETED)
-            for fut in finished:
-                a, b = pending.pop(fut)
-                pixels, batch_stats = fut.result()
-                image[a:b] = pixels
-                for key in BATCH_COUNTERS:
-                    totals[key] += batch_stats[key]
-                totals["batch_seconds"] += batch_stats["seconds"]
-                done += 1
-            tell(done / len(ranges), f"{label}: {done}/{len(ranges)} batches")
-            if cancelled is not None and cancelled():
-                was_cancelled = True
-                queue.clear()
             submit()
+            while pending:
+                finished, _ = wait(list(pending), return_when=FIRST_COMPLETED)
+                for fut in finished:
+                    a, b = pending.pop(fut)
+                    parts, batch_stats, batch_usage = fut.result()
+                    image[a:b] = parts[0] + parts[1] + parts[2]
+                    for index, name in enumerate(("Emission", "Direct", "Indirect")):
+                        if name in kinds:
+                            kinds[name][a:b] = parts[index]
+                    if usage is not None:
+                        usage[a:b] = batch_usage
+                    for key in BATCH_COUNTERS:
+                        totals[key] += batch_stats[key]
+                    totals["batch_seconds"] += batch_stats["seconds"]
+                    done += 1
+                tell(done / len(ranges), f"{label}: {done}/{len(ranges)} batches")
+                if cancelled is not None and cancelled():
+                    was_cancelled = True
+                    queue.clear()
+                submit()
+    except BaseException:
+        accel.close()
+        raise
     camera_seconds = time.perf_counter() - t0
     rays = totals["camera_rays"] + totals["shadow_rays"] + totals["specular_rays"]
     stage("camera", camera_seconds, batches=len(ranges), batches_done=done,
@@ -698,14 +877,29 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
             pixels_per_record_median=round(float(np.median(served)), 2),
             pixels_per_record_max=round(float(served.max()), 2),
             records_unused=int((served == 0).sum()), bytes=int(cache.stats().get("bytes", 0)))
+
+    # 6. passes
+    result_passes = {name: kinds[name].reshape(height, width, 3) for name in split}
+    if set(wanted) - set(split) and not was_cancelled:
+        t0 = time.perf_counter()
+        try:
+            result_passes.update(_diagnostic_passes(wanted, scene, settings, prep, usage))
+        except BaseException:
+            accel.close()
+            raise
+        stage("passes", time.perf_counter() - t0, passes=list(wanted))
+    report["passes"] = list(wanted)
     report["rays"] = {"camera": totals["camera_rays"], "shadow": totals["shadow_rays"],
                       "specular": totals["specular_rays"], "total": rays}
     report["scene"] = {"triangles": int(len(scene.triangles)), "materials": len(scene.materials),
                        "extent_m": scene.extent, "lights": lights.describe(),
                        "resolution": list(scene.camera.resolution), "window": list(scene.camera.border)}
-    report["total_seconds"] = round(time.perf_counter() - total_start, 6)
+    report["total_seconds"] = round(time.perf_counter() - prep.total_start, 6)
     report["peak_memory_mb"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1)
     report["cancelled"] = was_cancelled
+    artifacts_out = _artifacts_of(prep, scene, settings)
     accel.close()
     result_image = image.reshape(height, width, 3)
-    return RenderResult(image=result_image, report=report, cancelled=was_cancelled)
+    return RenderResult(image=result_image, passes=result_passes, report=report,
+                        cancelled=was_cancelled, artifacts=artifacts_out)
+

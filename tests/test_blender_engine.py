@@ -50,6 +50,8 @@ def registered():
 
 def reset():
     bpy.ops.wm.read_factory_settings(use_empty=True)
+    from lanterna.engine.blender import session
+    session.clear()                     # no maps kept from an earlier test's render
     return bpy.context.scene
 
 
@@ -374,10 +376,10 @@ def test_progress_and_cancel_are_wired(registered, tmp_path, monkeypatch, bounce
     real_render = pipeline.render
     seen = {}
 
-    def wrapped(scene, settings, progress=None, cancelled=None):
+    def wrapped(scene, settings, progress=None, cancelled=None, **kwargs):
         seen["test_break"] = cancelled()          # Blender's answer: nobody pressed Esc
         progress(0.5, "halfway")                  # must not raise
-        return real_render(scene, settings, progress=progress, cancelled=lambda: True)
+        return real_render(scene, settings, progress=progress, cancelled=lambda: True, **kwargs)
 
     monkeypatch.setattr(pipeline, "render", wrapped)
     image = rgb(render_f12(tmp_path))
@@ -400,3 +402,55 @@ def test_light_photon_share_is_exported(registered):
     light.lanterna.photon_share = 2.5
     lscene = export.export_scene(bpy.context.evaluated_depsgraph_get())
     assert [(l.name, l.photon_share) for l in lscene.lights] == [("Light", 2.5)]
+
+
+def test_passes_reach_the_render_result(registered, tmp_path):
+    """Ticked passes are registered for the view layer and filled: a multilayer EXR of the
+    Render Result holds them, and Combined = Direct + Indirect + Emission."""
+    scene = upper_wall_scene()
+    layer = bpy.context.view_layer
+    for prop in ("direct", "indirect", "emission", "cache_points"):
+        setattr(layer.lanterna_passes, prop, True)
+    fmt = scene.render.image_settings
+    if hasattr(fmt, "media_type"):                   # Blender 5.0: multilayer is a media type
+        fmt.media_type = 'MULTI_LAYER_IMAGE'
+    fmt.file_format = 'OPEN_EXR_MULTILAYER'
+    scene.render.filepath = str(tmp_path / "passes.exr")
+    scene.render.use_file_extension = False
+    bpy.ops.render.render(write_still=True)          # as a user's F12 + save or a batch render
+    channels = imageio.read_exr(tmp_path / "passes.exr")
+    name = layer.name
+    for pass_name in ("Direct", "Indirect", "Emission", "CachePoints"):
+        for c in "RGB":
+            assert f"{name}.{pass_name}.{c}" in channels, sorted(channels)
+    combined = np.stack([channels[f"{name}.Combined.{c}"] for c in "RGB"], axis=-1)
+    parts = sum(np.stack([channels[f"{name}.{p}.{c}"] for c in "RGB"], axis=-1)
+                for p in ("Direct", "Indirect", "Emission"))
+    np.testing.assert_allclose(parts, combined, rtol=0, atol=1e-4)
+    direct = channels[f"{name}.Direct.R"]
+    assert direct[:9].min() > 1e-3 and direct[15:].max() == 0.0      # upright, like Combined
+    assert set(np.unique(channels[f"{name}.CachePoints.R"])) <= {0.0, 1.0}
+    layer.lanterna_passes.cache_points = False
+    assert render_engine.LAST_RENDER["report"]["passes"] == [
+        "Direct", "Indirect", "Emission", "CachePoints"]
+
+
+def test_f12_reuses_kept_maps_only_for_the_same_scene(registered, tmp_path):
+    """A second F12 with only the samples changed reuses the first render's maps (same
+    fingerprint) and equals a fresh render; moving the light builds them afresh."""
+    scene = upper_wall_scene(samples=2)
+    scene.lanterna.photons = 20_000
+    render_f12(tmp_path, "first.exr")
+    assert render_engine.LAST_RENDER["maps_reused"] is False
+    scene.lanterna.samples = 4
+    second = rgb(render_f12(tmp_path, "second.exr"))
+    assert render_engine.LAST_RENDER["maps_reused"] is True
+    assert render_engine.LAST_RENDER["report"]["stages"]["photons"]["reused"] is True
+    from lanterna.engine.blender import session
+    session.clear()
+    fresh = rgb(render_f12(tmp_path, "fresh.exr"))
+    assert render_engine.LAST_RENDER["maps_reused"] is False
+    np.testing.assert_array_equal(second, fresh)
+    bpy.data.objects["Light"].location.x += 0.3
+    render_f12(tmp_path, "moved.exr")
+    assert render_engine.LAST_RENDER["maps_reused"] is False

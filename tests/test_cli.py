@@ -343,3 +343,26 @@ def test_help_is_fast_and_does_not_import_bpy():
 def test_bench_is_dispatched(capfd):
     assert cli.main(["bench", "--help"]) == 0
     assert "lanterna bench" in capfd.readouterr().out
+
+
+def test_passes_are_written_as_exr_layers(tmp_path, capfd):
+    exr = tmp_path / "p.exr"
+    code = cli.main(["render", "--resolution", "32x24", "--samples", "2", "--seed", "5",
+                     "--preset", "preview", "--photons", "20000", "-o", str(exr), "--quiet",
+                     "--passes", "direct,indirect,emission,cache-points,cache-usage"])
+    assert code == 0, capfd.readouterr().err
+    channels = imageio.read_exr(exr)
+    layers = ("Direct", "Indirect", "Emission", "CachePoints", "CacheUsage")
+    assert sorted(channels) == sorted(["R", "G", "B"] + [f"{n}.{c}" for n in layers for c in "RGB"])
+    for c in "RGB":
+        total = channels[f"Direct.{c}"] + channels[f"Indirect.{c}"] + channels[f"Emission.{c}"]
+        np.testing.assert_allclose(total, channels[c], rtol=0, atol=1e-4)
+        assert channels[f"Indirect.{c}"].mean() > 0.01
+    assert set(np.unique(channels["CachePoints.R"])) <= {0.0, 1.0}
+
+
+def test_unknown_pass_is_refused(tmp_path, capfd):
+    code = cli.main(["render", "-o", str(tmp_path / "x.exr"), "--passes", "direct,albedo"])
+    err = capfd.readouterr().err
+    assert code == 2 and "unknown pass 'albedo'" in err
+    assert list(tmp_path.iterdir()) == []

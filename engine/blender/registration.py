@@ -29,10 +29,10 @@ def unregister_classes(classes) -> None:
 
 def _modules():
     from ... import ops
-    from ...ui import panels, properties
+    from ...ui import panels, properties, render_passes, viewport
     from . import render_engine
 
-    return (properties, render_engine, ops, panels)
+    return (properties, render_passes, render_engine, ops, panels, viewport)
 
 
 def is_registered() -> bool:

@@ -14,14 +14,20 @@
 2. ``export.export_scene(depsgraph, resolution=(W, H), border=(x0, y0, x1, y1))`` and
    ``export.export_settings(scene)``; every ``Scene.warnings`` item is reported once.
 3. ``pipeline.render`` with progress -> ``update_progress``/``update_stats`` and
-   cancellation <- ``test_break``.
-4. The (H, W, 3) image, row 0 = top, goes into the Combined pass as RGBA with rows bottom-up.
+   cancellation <- ``test_break``. Maps baked (Lanterna > Bake in the 3D viewport's
+   sidebar), loaded from a file or kept from the last render are reused when their
+   fingerprint matches this scene and these map settings (the picture is the same); the
+   render's maps are then kept in ``engine/blender/session.py`` for the viewport overlay.
+4. The (H, W, 3) image, row 0 = top, goes into the Combined pass as RGBA with rows bottom-up;
+   the passes ticked in ``ViewLayer.lanterna_passes`` (``ui/render_passes.py``), registered in
+   ``update_render_passes``, go into theirs as RGB.
 
 Errors stop at this boundary: ``report({'ERROR'})`` + ``error_set`` with a one-line message,
 the traceback (for unexpected errors only) to stderr after a ``lanterna: render failed:``
 line. (``bpy.ops.render.render()`` then raises RuntimeError carrying the message, once per
 report: that is Blender turning ERROR reports into an exception, not ours escaping.)
-``LAST_RENDER`` keeps the last render's report, warnings, error and time for the panels.
+``LAST_RENDER`` keeps the last render's report, warnings, error, export time and total time
+for the panels (Render properties > Last Render).
 """
 from __future__ import annotations
 
@@ -34,17 +40,20 @@ import numpy as np
 
 ENGINE_ID = "LANTERNA"
 
-#: The last render: {"report", "warnings", "error", "total_time", "size", "border"}.
+#: The last render: {"report", "warnings", "error", "export_seconds", "total_time", "size",
+#: "border", "cancelled"}.
 LAST_RENDER: dict = {}
 
 
-def image_to_rect(image: np.ndarray) -> np.ndarray:
-    """(H, W, 3) row-0-top linear image -> flat float32 RGBA, rows bottom-up (Blender's rect)."""
+def image_to_rect(image: np.ndarray, channels: int = 4) -> np.ndarray:
+    """(H, W, 3) row-0-top linear image -> flat float32 RGBA (or RGB for a 3-channel pass),
+    rows bottom-up (Blender's rect)."""
     h, w = image.shape[:2]
-    rgba = np.empty((h, w, 4), np.float32)
-    rgba[..., :3] = image[::-1, :, :3]
-    rgba[..., 3] = 1.0
-    return rgba.ravel()
+    out = np.empty((h, w, channels), np.float32)
+    out[..., :3] = image[::-1, :, :3]
+    if channels == 4:
+        out[..., 3] = 1.0
+    return out.ravel()
 
 
 class LanternaRenderEngine(bpy.types.RenderEngine):
@@ -91,6 +100,7 @@ class LanternaRenderEngine(bpy.types.RenderEngine):
         self.update_stats("Lanterna", "Exporting scene")
         lscene = export.export_scene(depsgraph, resolution=(width, height), border=border)
         settings = export.export_settings(scene)
+        state["export_seconds"] = float(lscene.stats.get("export_seconds", 0.0))
         self._report_warnings(list(lscene.warnings), state)
 
         def progress(fraction, text=""):
@@ -98,20 +108,55 @@ class LanternaRenderEngine(bpy.types.RenderEngine):
             if text:
                 self.update_stats("Lanterna", str(text))
 
-        res = pipeline.render(lscene, settings, progress=progress, cancelled=self.test_break)
+        from ...ui.render_passes import enabled_passes
+        wanted = enabled_passes(depsgraph.view_layer) if depsgraph.view_layer else []
+        from . import session                # the maps stay for the viewport overlay
+        reuse = self._reusable_maps(session.get(scene.name), lscene, settings)
+        res = pipeline.render(lscene, settings, progress=progress, cancelled=self.test_break,
+                              passes=wanted, artifacts=reuse)
         state["report"] = res.report or {}
+        state["maps_reused"] = reuse is not None
+        if not res.cancelled:
+            session.put(scene.name, getattr(res, "artifacts", None), source="render")
         self._report_warnings(list((res.report or {}).get("warnings", ())), state)
 
         image = np.asarray(res.image, dtype=np.float32)
         if image.shape[:2] != (win_h, win_w) or image.ndim != 3 or image.shape[2] < 3:
             raise RuntimeError(f"pipeline returned an image of shape {image.shape}, "
                                f"expected ({win_h}, {win_w}, 3)")
-        result.layers[0].passes["Combined"].rect.foreach_set(image_to_rect(image))
+        layer_passes = result.layers[0].passes
+        layer_passes["Combined"].rect.foreach_set(image_to_rect(image))
+        for name, pass_image in res.passes.items():
+            target = layer_passes.get(name)
+            if target is not None:
+                target.rect.foreach_set(image_to_rect(pass_image, channels=3))
         self.update_progress(1.0)
         state["cancelled"] = bool(res.cancelled)
         plan = (res.report or {}).get("plan", {}).get("summary", "")
         self.update_stats("Lanterna", ("Cancelled" if res.cancelled else "Done")
                           + (f" | {plan}" if plan else ""))
+
+    @staticmethod
+    def _reusable_maps(artifacts, lscene, settings):
+        """Maps baked, loaded or kept from the last render, when they were made for exactly
+        this scene and these map settings (same fingerprint): the render then skips building
+        them and gives the same picture. Anything else: None (build afresh)."""
+        if artifacts is None:
+            return None
+        from ..artifacts import scene_fingerprint
+        try:
+            same = artifacts.fingerprint == scene_fingerprint(lscene, settings.resolved())
+        except Exception:  # noqa: BLE001 - a scene the fingerprint cannot take: build afresh
+            return None
+        return artifacts if same else None
+
+    # -- Passes --------------------------------------------------------------------------------
+    def update_render_passes(self, scene=None, renderlayer=None):
+        """Tell Blender which passes the view layer gets (Combined is always there), so they
+        show in the Image Editor, the compositor's Render Layers node and multilayer EXRs."""
+        from ...ui.render_passes import enabled_passes
+        for name in enabled_passes(renderlayer):
+            self.register_pass(scene, renderlayer, name, 3, "RGB", 'COLOR')
 
     # -- Reporting ----------------------------------------------------------------------------
     def _report_warnings(self, warnings, state):

@@ -1,0 +1,218 @@
+"""Render passes: what the renderer computed, as images beside Combined (issue 5; seed 12).
+
+What it computes
+    The diagnostic passes, each an (H, W, 3) float32 image of the render window, row 0 at the
+    top, from the maps a render built (``pipeline.render(..., passes=...)`` calls these after
+    the camera stage; Direct, Indirect and Emission come straight from the camera batches):
+
+    ==============  ===============  ======================================================
+    ``--passes``    pass (EXR layer)  what it shows
+    ==============  ===============  ======================================================
+    direct          Direct            exact direct light (``full`` mode)
+    indirect        Indirect          indirect light: cache, gather or photon map
+                                      (``full`` mode)
+    emission        Emission          emitters and the world seen from the camera or in
+                                      mirrors
+    photon-map      PhotonMap         the seed's direct view of the photon map (9.5, Fig.
+                                      12.6): the k-nearest estimate times rho_d / pi at the
+                                      first hit of each pixel's centre
+    cache-points    CachePoints       each irradiance-cache record visible from the camera
+                                      as a white dot (1.0) on black (Fig. 12.4)
+    photons         Photons           each stored photon visible from the camera as a dot of
+                                      its own colour, power / the brightest photon's, on
+                                      black (Fig. 12.5)
+    shadow-classes  ShadowClasses     shadow-photon classes at each pixel centre's first
+                                      hit: green = lit, red = penumbra, blue = umbra, each
+                                      the share of the shadow-photon lights in that class
+                                      (several lights mix); black where no light has
+                                      shadow photons or the surface is not diffuse
+    cache-usage     CacheUsage        per pixel, the share of its indirect look-ups
+                                      interpolated from records (green) and gathered afresh
+                                      because no record covered them (red)
+    ==============  ===============  ======================================================
+
+    Combined = Direct + Indirect + Emission (to float rounding) in ``full`` mode; in
+    ``photon-map`` mode Combined = PhotonMap-like estimate (held in Indirect) + Emission.
+
+Parameters
+    ``hits``: ``CentreHits`` of the pixel centres (one ray per pixel through its centre);
+    ``k`` photons per estimate and ``max_radius`` [m] as the render used them.
+
+Visibility of points (cache records, photons): a point is drawn when the ray from the camera
+towards it first meets a surface within ``VISIBLE_TOLERANCE`` x its distance of it (points
+lie on surfaces, so the ray stops at them or at an occluder in front).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+PASSES = {
+    "direct": "Direct",
+    "indirect": "Indirect",
+    "emission": "Emission",
+    "photon-map": "PhotonMap",
+    "cache-points": "CachePoints",
+    "photons": "Photons",
+    "shadow-classes": "ShadowClasses",
+    "cache-usage": "CacheUsage",
+}
+PASS_NAMES = tuple(PASSES.values())
+VISIBLE_TOLERANCE = 1e-3
+LIT_RGB, PENUMBRA_RGB, UMBRA_RGB = (0.0, 1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, 1.0)
+
+
+def parse_passes(text) -> tuple[str, ...]:
+    """``"direct,indirect"`` (or a list, or ``"all"``) -> pass names (``("Direct",
+    "Indirect")``); an unknown name raises ValueError listing the known ones."""
+    if text is None or text == "":
+        return ()
+    items = text.split(",") if isinstance(text, str) else list(text)
+    items = [str(i).strip() for i in items if str(i).strip()]
+    if items == ["all"]:
+        return PASS_NAMES
+    by_name = {**PASSES, **{v.lower(): v for v in PASS_NAMES}, **{v: v for v in PASS_NAMES}}
+    out = []
+    for item in items:
+        key = by_name.get(item) or by_name.get(item.lower())
+        if key is None:
+            raise ValueError(f"unknown pass {item!r}; passes are {', '.join(PASSES)} or all")
+        if key not in out:
+            out.append(key)
+    return tuple(out)
+
+
+@dataclass
+class CentreHits:
+    """First hits of one ray per window pixel through the pixel's centre."""
+
+    pixel: np.ndarray        # (n,) window pixel index (row-major, top row first) of each hit
+    x: np.ndarray            # (n, 3) hit position [m]
+    ns: np.ndarray           # (n, 3) shading normal, towards the camera
+    ng: np.ndarray           # (n, 3) geometric normal, towards the camera
+    material: np.ndarray     # (n,) material index
+    diffuse: np.ndarray      # (n,) bool: the material reflects diffusely
+    shape: tuple             # (H, W) of the window
+
+
+def photon_map_view(hits: CentreHits, photon_map, k, max_radius, min_bounces, diffuse_over_pi,
+                    cone_filter=None) -> np.ndarray:
+    """The seed's direct view of the photon map (9.5): L = rho_d / pi * E_k at each pixel
+    centre's first diffuse hit (E_k: the k-nearest estimate, Eq. 9.11, counting photons of
+    at least ``min_bounces`` bounces)."""
+    h, w = hits.shape
+    image = np.zeros((h * w, 3), np.float32)
+    d = np.nonzero(hits.diffuse)[0]
+    if len(d) and photon_map is not None and len(photon_map):
+        e = photon_map.irradiance(hits.x[d], hits.ng[d], k=k, max_radius=max_radius,
+                                  min_bounces=min_bounces, cone_filter=cone_filter)
+        image[hits.pixel[d]] = e * diffuse_over_pi[hits.material[d]]
+    return image.reshape(h, w, 3)
+
+
+def shadow_classes_image(hits: CentreHits, shadow_map, light_indices) -> np.ndarray:
+    """Green / red / blue shares of the lights in ``light_indices`` (indices in
+    ``lights.sampled`` that the shadow-photon map covers) for which each pixel centre's
+    first diffuse hit is lit / penumbra / umbra."""
+    from .shadow_photons import LIT, PENUMBRA, UMBRA
+
+    h, w = hits.shape
+    image = np.zeros((h * w, 3), np.float32)
+    lights = [li for li in light_indices if shadow_map is not None and shadow_map.covers(li)]
+    d = np.nonzero(hits.diffuse)[0]
+    if not lights or not len(d):
+        return image.reshape(h, w, 3)
+    colours = {LIT: np.array(LIT_RGB, np.float32), PENUMBRA: np.array(PENUMBRA_RGB, np.float32),
+               UMBRA: np.array(UMBRA_RGB, np.float32)}
+    acc = np.zeros((len(d), 3), np.float32)
+    for li in lights:
+        cls = shadow_map.classify(hits.x[d], hits.ns[d], li)
+        for value, rgb in colours.items():
+            acc[cls == value] += rgb
+    image[hits.pixel[d]] = acc / len(lights)
+    return image.reshape(h, w, 3)
+
+
+def project_to_window(camera, points: np.ndarray):
+    """Window pixel (row-major, top row first; -1 outside the window or behind the camera)
+    and distance [m] from the camera of each world-space point: the inverse of
+    ``camera.pixel_rays``' pixel-centre mapping."""
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    m = camera.matrix
+    rotation = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0)
+    local = (p - m[:3, 3]) @ rotation             # camera space: looks along -z
+    depth = -local[:, 2]
+    ok = depth > camera.clip_start
+    safe = np.where(ok, depth, 1.0)
+    lx, ly = local[:, 0] / safe, local[:, 1] / safe
+    full_w, full_h = camera.resolution
+    px = np.floor((lx - (camera.shift_x - camera.tan_half_x)) * full_w / (2 * camera.tan_half_x))
+    py = np.floor((ly - (camera.shift_y - camera.tan_half_y)) * full_h / (2 * camera.tan_half_y))
+    x0, y0, x1, y1 = camera.border
+    ok &= (px >= x0) & (px < x1) & (py >= y0) & (py < y1)
+    win_w, win_h = x1 - x0, y1 - y0
+    col = px - x0
+    row = (win_h - 1) - (py - y0)
+    pixel = np.where(ok, row * win_w + col, -1).astype(np.int64)
+    return pixel, np.linalg.norm(p - m[:3, 3], axis=1)
+
+
+def visible_points(camera, accel, points: np.ndarray):
+    """(window pixel, mask of visible points): projection plus an occlusion ray each."""
+    pixel, dist = project_to_window(camera, points)
+    inside = np.nonzero(pixel >= 0)[0]
+    visible = np.zeros(len(pixel), bool)
+    if len(inside):
+        eye = np.asarray(camera.matrix[:3, 3], np.float64)
+        d = np.asarray(points, np.float64)[inside] - eye
+        dist_in = dist[inside]
+        d /= np.maximum(dist_in, 1e-30)[:, None]
+        origins = np.broadcast_to(eye, d.shape).astype(np.float32)
+        t, prim, _u, _v = accel.intersect(origins, d.astype(np.float32), None)
+        reach = dist_in * (1.0 - VISIBLE_TOLERANCE) - 1e-6
+        visible[inside] = (prim < 0) | (t >= reach)
+    return pixel, visible
+
+
+def points_image(camera, accel, points: np.ndarray, colours, shape) -> np.ndarray:
+    """An image of black with each visible point as one pixel of its colour ((n, 3) or one
+    RGB); where several points fall in one pixel the last one listed is kept."""
+    h, w = shape
+    image = np.zeros((h * w, 3), np.float32)
+    if len(points):
+        pixel, visible = visible_points(camera, accel, points)
+        keep = np.nonzero(visible)[0]
+        colours = np.broadcast_to(np.asarray(colours, np.float32), (len(points), 3))
+        image[pixel[keep]] = colours[keep]
+    return image.reshape(h, w, 3)
+
+
+def photons_image(camera, accel, photon_map, shape) -> np.ndarray:
+    """Fig. 12.5: the stored photons visible from the camera, each a dot of colour power /
+    the largest channel of any photon's power."""
+    if photon_map is None or not len(photon_map):
+        return np.zeros(shape + (3,), np.float32)
+    power = np.asarray(photon_map.power, np.float32)
+    peak = float(power.max()) or 1.0
+    return points_image(camera, accel, photon_map.positions, power / peak, shape)
+
+
+def cache_points_image(camera, accel, cache, shape) -> np.ndarray:
+    """Fig. 12.4: every irradiance-cache record visible from the camera as a white dot."""
+    if cache is None or not len(cache):
+        return np.zeros(shape + (3,), np.float32)
+    return points_image(camera, accel, cache.positions, (1.0, 1.0, 1.0), shape)
+
+
+def cache_usage_image(usage: np.ndarray | None, shape) -> np.ndarray:
+    """Per pixel: red = share of its look-ups gathered afresh, green = share interpolated,
+    from the camera batches' (pixels, 2) counts (interpolated, gathered) per sample."""
+    h, w = shape
+    image = np.zeros((h * w, 3), np.float32)
+    if usage is not None:
+        total = usage.sum(axis=1)
+        asked = total > 0
+        image[asked, 1] = usage[asked, 0] / total[asked]
+        image[asked, 0] = usage[asked, 1] / total[asked]
+    return image.reshape(h, w, 3)

@@ -1,0 +1,92 @@
+"""Lanterna's render passes in Blender: which to make, per view layer, and where to tick them.
+
+``ViewLayer.lanterna_passes`` (:class:`LanternaPassSettings`) holds one checkbox per pass of
+``engine/passes.py`` (Direct, Indirect, Emission, PhotonMap, CachePoints, Photons,
+ShadowClasses, CacheUsage; all off by default, so a plain render makes only Combined). The
+RenderEngine registers the ticked ones in ``update_render_passes`` (they then appear in the
+Image Editor's pass menu, in the compositor's Render Layers node and in multilayer EXRs, as
+Cycles' passes do) and fills them after the render. The checkboxes sit in View Layer
+properties > Passes (grouped Light / Method, like Cycles' pass panels); changing one
+calls ``ViewLayer.update_render_passes()`` so the compositor's sockets follow at once.
+"""
+from __future__ import annotations
+
+import bpy
+from bpy.props import BoolProperty
+
+from ..engine.passes import PASS_NAMES, PASSES
+from .panels import LanternaPanel
+
+# property name -> (pass name, label, description)
+PASS_PROPERTIES = {
+    "direct": ("Direct", "Direct", "Exact direct light"),
+    "indirect": ("Indirect", "Indirect", "Indirect light (irradiance cache, gather or photon map)"),
+    "emission": ("Emission", "Emission", "Emitters and the world seen from the camera"),
+    "photon_map": ("PhotonMap", "Photon Map", "The photon map seen directly (seed Fig. 12.6)"),
+    "cache_points": ("CachePoints", "Cache Points",
+                     "Each irradiance-cache record as a white dot (seed Fig. 12.4)"),
+    "photons": ("Photons", "Photons", "Each stored photon as a dot of its colour (seed Fig. 12.5)"),
+    "shadow_classes": ("ShadowClasses", "Shadow Classes",
+                       "Shadow-photon classes: green lit, red penumbra, blue umbra"),
+    "cache_usage": ("CacheUsage", "Cache Usage",
+                    "Share of look-ups interpolated from records (green) and gathered (red)"),
+}
+assert tuple(p[0] for p in PASS_PROPERTIES.values()) == PASS_NAMES
+assert set(PASSES.values()) == set(PASS_NAMES)
+
+
+def _update_passes(self, context):
+    # A ViewLayer is not an ID: id_data is its Scene; find the layer these settings are on.
+    for layer in getattr(self.id_data, "view_layers", ()):
+        if layer.lanterna_passes.as_pointer() == self.as_pointer():
+            layer.update_render_passes()
+
+
+def _annotations():
+    return {prop: BoolProperty(name=label, description=desc, default=False, update=_update_passes)
+            for prop, (_name, label, desc) in PASS_PROPERTIES.items()}
+
+
+LanternaPassSettings = type("LanternaPassSettings", (bpy.types.PropertyGroup,),
+                            {"__annotations__": _annotations(),
+                             "__doc__": "Which Lanterna passes this view layer makes."})
+
+
+def enabled_passes(view_layer) -> list[str]:
+    """Pass names (``engine/passes.py``) ticked on ``view_layer``."""
+    settings = getattr(view_layer, "lanterna_passes", None)
+    if settings is None:
+        return []
+    return [name for prop, (name, _l, _d) in PASS_PROPERTIES.items() if getattr(settings, prop)]
+
+
+class LANTERNA_VIEW_LAYER_PT_passes(LanternaPanel, bpy.types.Panel):
+    bl_label = "Passes"
+    bl_context = "view_layer"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        settings = context.view_layer.lanterna_passes
+        col = layout.column(heading="Light", align=True)
+        for prop in ("direct", "indirect", "emission"):
+            col.prop(settings, prop)
+        col = layout.column(heading="Method", align=True)
+        for prop in ("photon_map", "photons", "cache_points", "cache_usage", "shadow_classes"):
+            col.prop(settings, prop)
+
+
+def register():
+    bpy.utils.register_class(LanternaPassSettings)
+    bpy.types.ViewLayer.lanterna_passes = bpy.props.PointerProperty(type=LanternaPassSettings)
+    bpy.utils.register_class(LANTERNA_VIEW_LAYER_PT_passes)
+
+
+def unregister():
+    if getattr(LANTERNA_VIEW_LAYER_PT_passes, "is_registered", False):
+        bpy.utils.unregister_class(LANTERNA_VIEW_LAYER_PT_passes)
+    if hasattr(bpy.types.ViewLayer, "lanterna_passes"):
+        del bpy.types.ViewLayer.lanterna_passes
+    if getattr(LanternaPassSettings, "is_registered", False):
+        bpy.utils.unregister_class(LanternaPassSettings)
