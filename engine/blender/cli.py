@@ -4,6 +4,7 @@ run the benchmarks.
 Usage
 -----
 ``lanterna render [SCENE.blend] -o OUT.exr [--png OUT.png] [--report REPORT.json]``
+    ``[--sensitivity P2|auto] [--knee P1]``
     ``[--scene scene1|scene2] [--resolution WxH] [--samples N] [--light-samples N]``
     ``[--bounces N] [--seed N] [--threads N] [--mode full|photon-map] [--photons N]``
     ``[--photon-k N] [--photon-radius R] [--photon-filter none|cone] [--photon-lookups N]``
@@ -18,7 +19,15 @@ Usage
     Writes ``OUT.exr`` (channels R, G, B, float32, linear radiance [W m^-2 sr^-1]), the
     optional sRGB ``OUT.png`` (clipped, no tone mapping) and the optional JSON report: the
     pipeline's report, the export statistics, warnings, settings, timings and peak memory.
-    Progress and warnings go to stderr.
+    Progress and warnings go to stderr. With ``--sensitivity`` the PNG is made with the
+    seed's tone curve instead (``engine/tonemap.py``, Fig. 11.1), as ``lanterna tonemap``.
+
+``lanterna tonemap IN.exr OUT.png [--sensitivity P2|auto] [--knee P1]``
+    The seed's conversion of radiance to RGB (section 11.2, Fig. 11.1; section 12.2.1):
+    radiance at and above the saturation point ``P2`` [W m^-2 sr^-1] is 255, the knee
+    ``P1`` defaults to ``P2 / 4``; ``auto`` (the default) puts the knee at the 95th
+    percentile of the pixels' brightest channel. Reads channels R, G, B (or one layer's,
+    e.g. ``ViewLayer.Combined``); writes an 8-bit PNG. Needs no ``bpy``.
 
 ``lanterna scene scene1|scene2 -o FILE.blend``
     Builds a seed scene (``engine/blender/seed_scenes.py``) and saves it.
@@ -110,6 +119,53 @@ def _resolution(text: str) -> tuple[int, int]:
     return w, h
 
 
+def _radiance(allow_auto: bool):
+    def parse(text: str):
+        if allow_auto and text.strip().lower() == "auto":
+            return "auto"
+        try:
+            value = float(text)
+        except ValueError:
+            expected = "a number or 'auto'" if allow_auto else "a number"
+            raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}") from None
+        if not (0.0 < value < float("inf")):
+            raise argparse.ArgumentTypeError(f"must be a finite radiance > 0, got {text}")
+        return value
+    parse.__name__ = "radiance"
+    return parse
+
+
+def _tone_parameters(args) -> None:
+    """Check --sensitivity and --knee together (before any work)."""
+    if args.knee is not None and args.sensitivity in (None, "auto"):
+        raise UsageError("--knee P1 needs --sensitivity P2 (a number)")
+    if args.knee is not None and not args.knee < args.sensitivity:
+        raise UsageError(f"--knee {args.knee:g} must be below --sensitivity "
+                         f"{args.sensitivity:g}")
+
+
+def _write_tone_png(path: str, image, sensitivity, knee) -> dict:
+    """The seed's tone curve of ``image`` written to ``path``; returns the p2 and p1 used."""
+    from .. import tonemap
+
+    try:
+        if sensitivity == "auto":
+            sensitivity, knee = tonemap.auto_sensitivity(image)
+        p2, p1 = tonemap.check_parameters(sensitivity, knee)
+        tonemap.write_png(path, tonemap.seed_tone_curve(image, p2, p1))
+    except tonemap.ToneMapError as exc:
+        raise UsageError(str(exc)) from None
+    return {"sensitivity": p2, "knee": p1}
+
+
+def _passes(text: str):
+    from ..passes import parse_passes
+    try:
+        return parse_passes(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog=PROG, description="Lanterna: photon-mapping renderer for Blender scenes.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
@@ -123,7 +179,16 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("-o", "--output", required=True, metavar="OUT.exr",
                         help="the OpenEXR file to write (R, G, B float32, linear)")
     render.add_argument("--png", metavar="OUT.png", help="also write an sRGB 8-bit PNG")
+    render.add_argument("--sensitivity", type=_radiance(True), metavar="P2",
+                        help="make the PNG with the seed's tone curve (Fig. 11.1): saturation "
+                             "point P2 in W m^-2 sr^-1, or 'auto'")
+    render.add_argument("--knee", type=_radiance(False), metavar="P1",
+                        help="the tone curve's knee (default P2/4)")
     render.add_argument("--report", metavar="REPORT.json", help="write the render report as JSON")
+    render.add_argument("--passes", type=_passes, metavar="LIST", default=(),
+                        help="extra passes written as EXR layers (Direct.R, ...): comma-separated "
+                             "from direct, indirect, emission, photon-map, cache-points, photons, "
+                             "shadow-classes, cache-usage, or all")
     render.add_argument("--resolution", type=_resolution, metavar="WxH",
                         help="full-frame size in pixels (percentage set to 100)")
     render.add_argument("--samples", type=_int_at_least(1, 65536), metavar="N",
@@ -170,6 +235,20 @@ def build_parser() -> argparse.ArgumentParser:
                            description="Build one of the seed's scenes and save it.")
     scene.add_argument("name", choices=SEED_SCENES)
     scene.add_argument("-o", "--output", required=True, metavar="FILE.blend")
+
+    tone = sub.add_parser("tonemap", help="convert an EXR to PNG with the seed's tone curve",
+                          description="Convert linear radiance (OpenEXR) to an 8-bit PNG with "
+                                      "the seed's tone curve (Fig. 11.1, section 12.2.1).")
+    tone.add_argument("input", metavar="IN.exr", help="OpenEXR file of linear radiance")
+    tone.add_argument("output", metavar="OUT.png", help="the PNG to write")
+    tone.add_argument("--sensitivity", type=_radiance(True), default="auto", metavar="P2",
+                      help="saturation point P2 in W m^-2 sr^-1 (default 'auto': knee at the "
+                           "95th percentile)")
+    tone.add_argument("--knee", type=_radiance(False), metavar="P1",
+                      help="the knee P1, 0 < P1 < P2 (default P2/4)")
+    tone.add_argument("--layer", default=None, metavar="NAME",
+                      help="the EXR layer to convert, e.g. a pass written by render --passes "
+                           "(Direct, CachePoints, ...; default: the image itself)")
 
     sub.add_parser("bench", help="run the benchmarks (arguments are passed on)", add_help=False)
     return parser
@@ -335,6 +414,9 @@ def cmd_render(args) -> int:
     outputs = {"exr": _check_output(args.output, ".exr", "-o")}
     if args.png:
         outputs["png"] = _check_output(args.png, ".png", "--png")
+    elif args.sensitivity is not None or args.knee is not None:
+        raise UsageError("--sensitivity and --knee need --png OUT.png")
+    _tone_parameters(args)
     if args.report:
         outputs["report"] = _check_output(args.report, ".json", "--report")
     if len(set(outputs.values())) != len(outputs):
@@ -384,7 +466,7 @@ def cmd_render(args) -> int:
     with _sigint_flag() as interrupted:
         try:
             result = pipeline.render(lscene, settings, progress=progress,
-                                     cancelled=lambda: interrupted["set"])
+                                     cancelled=lambda: interrupted["set"], passes=args.passes)
         except SceneError as exc:
             raise UsageError(str(exc)) from None
         finally:
@@ -416,9 +498,17 @@ def cmd_render(args) -> int:
     }
     with contextlib.ExitStack() as stack:
         exr_tmp = stack.enter_context(imageio.atomic_output(outputs["exr"]))
-        imageio.write_exr(exr_tmp, image, attributes={"software": f"Lanterna {_version()}"})
+        layers = {name: _full_frame(result.passes[name], lscene.camera,
+                                    crop=bool(scene.render.use_crop_to_border))
+                  for name in args.passes if name in result.passes}
+        imageio.write_exr(exr_tmp, image, extra_channels=layers,
+                          attributes={"software": f"Lanterna {_version()}"})
         if "png" in outputs:
-            imageio.write_png(stack.enter_context(imageio.atomic_output(outputs["png"])), image)
+            png_tmp = stack.enter_context(imageio.atomic_output(outputs["png"]))
+            if args.sensitivity is None:
+                imageio.write_png(png_tmp, image)
+            else:
+                report["tonemap"] = _write_tone_png(png_tmp, image, args.sensitivity, args.knee)
         if "report" in outputs:
             report_tmp = stack.enter_context(imageio.atomic_output(outputs["report"]))
             report["time"]["write_seconds"] = time.perf_counter() - t0
@@ -431,6 +521,10 @@ def cmd_render(args) -> int:
     h, w = image.shape[:2]
     print(f"{PROG}: wrote {outputs['exr']} ({w}x{h}, {settings.samples} spp) "
           f"in {total:.2f} s ({render_seconds:.2f} s rendering)")
+    if "tonemap" in report:
+        print(f"{PROG}: wrote {outputs['png']} with the seed's tone curve, sensitivity p2 = "
+              f"{report['tonemap']['sensitivity']:.6g}, knee p1 = "
+              f"{report['tonemap']['knee']:.6g} W m^-2 sr^-1")
     return EXIT_OK
 
 
@@ -480,6 +574,24 @@ def cmd_scene(args) -> int:
     return EXIT_OK
 
 
+def cmd_tonemap(args) -> int:
+    from .. import imageio, tonemap  # no bpy
+
+    _tone_parameters(args)
+    output = _check_output(args.output, ".png", "OUT.png")
+    try:
+        image = tonemap.read_radiance(os.path.abspath(os.path.expanduser(args.input)),
+                                      layer=args.layer)
+    except tonemap.ToneMapError as exc:
+        raise UsageError(str(exc)) from None
+    with imageio.atomic_output(output) as tmp:
+        used = _write_tone_png(tmp, image, args.sensitivity, args.knee)
+    h, w = image.shape[:2]
+    print(f"{PROG}: wrote {output} ({w}x{h}, sensitivity p2 = {used['sensitivity']:.6g}, "
+          f"knee p1 = {used['knee']:.6g} W m^-2 sr^-1)")
+    return EXIT_OK
+
+
 def cmd_bench(argv: list[str]) -> int:
     bench_main = None
     for module in ("lanterna.engine.blender.bench", "lanterna.engine.bench"):
@@ -505,6 +617,8 @@ def main(argv=None) -> int:
             return cmd_render(args)
         if args.command == "scene":
             return cmd_scene(args)
+        if args.command == "tonemap":
+            return cmd_tonemap(args)
         build_parser().print_help(sys.stderr)
         return EXIT_USAGE
     except UsageError as exc:
