@@ -1,14 +1,28 @@
-"""Operators (``LANTERNA_OT_*``). None yet; ``register``/``unregister`` keep the place in
-``engine.blender.registration``'s order so that later operators need no other change."""
+"""Operators (``LANTERNA_OT_*``), one module per family, registered in ``MODULES`` order by
+``engine.blender.registration`` (after the RenderEngine, before the panels). Each module has
+``register()`` / ``unregister()``; ``unregister`` runs in reverse order."""
+import importlib
 
-classes = ()
+# Module names under ops/, in registration order.
+MODULES = ("bake", "import_ase")
+
+
+def _modules():
+    return [importlib.import_module(f"{__name__}.{name}") for name in MODULES]
 
 
 def register():
-    from ..engine.blender.registration import register_classes
-    register_classes(classes)
+    done = []
+    try:
+        for module in _modules():
+            module.register()
+            done.append(module)
+    except Exception:
+        for module in reversed(done):
+            module.unregister()
+        raise
 
 
 def unregister():
-    from ..engine.blender.registration import unregister_classes
-    unregister_classes(classes)
+    for module in reversed(_modules()):
+        module.unregister()
