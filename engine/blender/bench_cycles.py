@@ -15,12 +15,17 @@ What it computes (``lanterna bench --vs-cycles`` or
        on, no clamping, no adaptive sampling, light threshold 0, Blackman-Harris 1.5, no path
        guiding; the benchmark runs from a checkout, and says so if that file is missing) at
        each of ``--cycles-samples`` (64, 256, 1024), without and with the
-       OpenImageDenoise denoiser (CPU, albedo + normal passes, prefilter ``ACCURATE``). Each is
-       rendered to a float EXR and read back with OpenEXR (row 0 = top); its time is the wall
-       time of ``bpy.ops.render.render(write_still=True)`` (scene sync, BVH, path tracing,
-       denoising and writing the small EXR; reading it back excluded). Cycles' seed is
-       ``CYCLES_SEED``, not one of the references' seeds, so the two are independent. One
-       1-sample Cycles render per process, not timed, loads the kernels first.
+       OpenImageDenoise denoiser (CPU, albedo + normal passes, prefilter ``ACCURATE``). One
+       render per sample count gives both: the denoiser on, its passes stored, written as a
+       multilayer EXR and read back with OpenEXR (row 0 = top); "Combined" is the denoised
+       image and "Noisy Image" the same samples before denoising (checked bit-identical to a
+       render with the denoiser off). The denoised time is the wall time of
+       ``bpy.ops.render.render(write_still=True)`` (scene sync, BVH, path tracing, denoising,
+       writing the EXR; reading it back excluded); the undenoised time is that less OIDN's
+       own time at this resolution, measured per scene as the difference of 1-spp renders
+       with and without the denoiser (best of 2 each). Cycles' seed is ``CYCLES_SEED``, not
+       one of the references' seeds, so the two are independent. One 1-sample Cycles render
+       per process, not timed, loads the kernels first.
     3. The reference: at 160 x 120, the stored ``tests/data/cycles_gi/<scene>.npz`` (Cycles,
        same settings, 4 seeds x 768 spp). At any other resolution Cycles renders one at
        ``--reference-samples`` (4096) split over 2 seeds, cached as
@@ -175,6 +180,59 @@ def oidn_available() -> bool:
     return bool(getattr(_cycles, "with_openimagedenoise", False))
 
 
+def render_with_noisy_pass(scene, path: str):
+    """One Cycles render with the denoiser on and its passes stored, written as a multilayer
+    EXR and read back: ({"Combined": denoised, "Noisy Image": the same samples undenoised},
+    seconds of ``bpy.ops.render.render(write_still=True)``). One render gives both images, so
+    a sample count costs one render, not two."""
+    import bpy
+
+    from .. import imageio
+
+    layer = scene.view_layers[0]
+    layer.cycles.denoising_store_passes = True
+    fmt = scene.render.image_settings
+    old_media = getattr(fmt, "media_type", None)
+    try:
+        if old_media is not None:                   # Blender 5.0: multilayer is a media type
+            fmt.media_type = 'MULTI_LAYER_IMAGE'
+        fmt.file_format = 'OPEN_EXR_MULTILAYER'
+        fmt.color_depth = "32"
+        fmt.exr_codec = "ZIP"
+        scene.render.filepath = path
+        scene.render.use_file_extension = False
+        t0 = time.perf_counter()
+        bpy.ops.render.render(write_still=True, scene=scene.name)
+        seconds = time.perf_counter() - t0
+    finally:
+        layer.cycles.denoising_store_passes = False
+        if old_media is not None:
+            fmt.media_type = old_media
+        fmt.file_format = "OPEN_EXR"
+    channels = imageio.read_exr(path)
+    out = {}
+    for pass_name in ("Combined", "Noisy Image"):
+        key = f"{layer.name}.{pass_name}."
+        out[pass_name] = np.stack([channels[key + c] for c in "RGB"], axis=-1).astype(np.float64)
+    return out, seconds
+
+
+def measure_denoise_seconds(scene, configure, render_exr, tmpdir, name) -> float:
+    """OIDN's time at this resolution: a 1-spp render with the denoiser minus one without
+    (best of 2 each, after a warm-up); subtracted from a denoised render's time to give the
+    time of the same render without the denoiser."""
+    times = {False: [], True: []}
+    for _ in range(2):
+        for den in (False, True):
+            configure(scene, 1, CYCLES_SEED, gi=True)
+            with _blender_output_to(os.path.join(tmpdir, "blender.log")):
+                if den:
+                    set_denoiser(scene)
+                _img, dt = render_exr(scene, os.path.join(tmpdir, f"{name}_den{int(den)}.exr"))
+            times[den].append(dt)
+    return max(min(times[True]) - min(times[False]), 0.0)
+
+
 # -- Errors --------------------------------------------------------------------------------------
 def block_means(image: np.ndarray, grid=GRID) -> np.ndarray:
     """(H, W, C) -> (GY, GX) means over equal blocks and the channels."""
@@ -314,33 +372,36 @@ def bench_scene(name, resolution, cycles_samples, reference_samples, cycles, tmp
         except Exception:  # noqa: BLE001 - the real renders below report the failure
             pass
         warm["done"] = True
+    # The denoiser's own time: a 1-spp render with and without it (warm), the difference.
+    denoise_seconds = measure_denoise_seconds(bscene, configure, render_exr, tmpdir, name)
+    out["denoise_seconds"] = denoise_seconds
     for spp in cycles_samples:
-        for denoise in (False, True):
-            label = f"Cycles {spp} spp{' + OIDN' if denoise else ''}"
-            _log(f"{name}: {label} ...")
-            configure(bscene, spp, CYCLES_SEED, gi=True)
-            row = {"method": "Cycles", "samples": spp, "denoiser": denoise, "seed": CYCLES_SEED,
-                   "threads": bscene.render.threads}
-            if denoise:
-                with _blender_output_to(os.path.join(tmpdir, "blender.log")):
-                    row["denoiser_settings"] = set_denoiser(bscene)
-            try:
-                with _blender_output_to(os.path.join(tmpdir, "blender.log")):
-                    img, dt = render_exr(bscene, os.path.join(tmpdir, f"{name}_{spp}_{int(denoise)}.exr"))
-            except Exception as exc:  # noqa: BLE001
-                msg = f"{name}: {label} failed: {' '.join(str(exc).split())}"
-                print(f"lanterna bench: error: {msg}", file=sys.stderr)
-                out["failures"].append(msg)
-                continue
-            if img.shape[:2] != (h, w):
-                out["failures"].append(f"{name}: {label}: image {img.shape[1]}x{img.shape[0]}")
-                continue
-            row["seconds"] = dt
-            if denoise and ("cycles", spp, False) in images:
-                row["denoiser_changed_image"] = bool(
-                    np.abs(img - images[("cycles", spp, False)]).max() > 0)
-            images[("cycles", spp, denoise)] = img
-            out["rows"].append(row)
+        label = f"Cycles {spp} spp (+ OIDN)"
+        _log(f"{name}: {label} ...")
+        configure(bscene, spp, CYCLES_SEED, gi=True)
+        try:
+            with _blender_output_to(os.path.join(tmpdir, "blender.log")):
+                den_settings = set_denoiser(bscene)
+                passes, dt = render_with_noisy_pass(bscene, os.path.join(tmpdir, f"{name}_{spp}.exr"))
+        except Exception as exc:  # noqa: BLE001
+            msg = f"{name}: {label} failed: {' '.join(str(exc).split())}"
+            print(f"lanterna bench: error: {msg}", file=sys.stderr)
+            out["failures"].append(msg)
+            continue
+        noisy, denoised = passes["Noisy Image"], passes["Combined"]
+        if noisy.shape[:2] != (h, w):
+            out["failures"].append(f"{name}: {label}: image {noisy.shape[1]}x{noisy.shape[0]}")
+            continue
+        images[("cycles", spp, False)] = noisy
+        images[("cycles", spp, True)] = denoised
+        common = {"method": "Cycles", "samples": spp, "seed": CYCLES_SEED,
+                  "threads": bscene.render.threads, "render_seconds_with_oidn": dt}
+        out["rows"].append({**common, "denoiser": False,
+                            "seconds": max(dt - denoise_seconds, 0.0),
+                            "seconds_note": "the render's time less the denoiser's"})
+        out["rows"].append({**common, "denoiser": True, "seconds": dt,
+                            "denoiser_settings": den_settings,
+                            "denoiser_changed_image": bool(np.abs(denoised - noisy).max() > 0)})
     out["cycles_settings"] = {k: v for k, v in configure(bscene, 1, CYCLES_SEED, gi=True).items()
                               if k not in ("samples", "seed")}
 
