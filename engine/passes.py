@@ -19,8 +19,9 @@ What it computes
     cache-points    CachePoints       each irradiance-cache record visible from the camera
                                       as a white dot (1.0) on black (Fig. 12.4)
     photons         Photons           each stored photon visible from the camera as a dot of
-                                      its own colour, power / the brightest photon's, on
-                                      black (Fig. 12.5)
+                                      its own colour (power / its largest channel: white
+                                      photons are white, the blue wall's blue) on black
+                                      (Fig. 12.5)
     shadow-classes  ShadowClasses     shadow-photon classes at each pixel centre's first
                                       hit: green = lit, red = penumbra, blue = umbra, each
                                       the share of the shadow-photon lights in that class
@@ -189,12 +190,12 @@ def points_image(camera, accel, points: np.ndarray, colours, shape) -> np.ndarra
 
 
 def photons_image(camera, accel, photon_map, shape) -> np.ndarray:
-    """Fig. 12.5: the stored photons visible from the camera, each a dot of colour power /
-    the largest channel of any photon's power."""
+    """Fig. 12.5: the stored photons visible from the camera, each a dot of its colour:
+    power / its own largest channel (so every dot is bright, whatever its power)."""
     if photon_map is None or not len(photon_map):
         return np.zeros(shape + (3,), np.float32)
     power = np.asarray(photon_map.power, np.float32)
-    peak = float(power.max()) or 1.0
+    peak = np.maximum(power.max(axis=1, keepdims=True), np.float32(1e-30))
     return points_image(camera, accel, photon_map.positions, power / peak, shape)
 
 

@@ -90,7 +90,7 @@ def test_photons_and_cache_points_show_the_maps(cached):
     photons = cached.passes["Photons"]
     lit = photons.reshape(-1, 3)
     lit = lit[lit.max(axis=1) > 0]
-    power = art.photon_map.power / art.photon_map.power.max()
+    power = art.photon_map.power / art.photon_map.power.max(axis=1, keepdims=True)
     # every dot is the colour of a stored photon
     keys = {tuple(np.round(c, 6)) for c in power}
     assert all(tuple(np.round(c, 6)) in keys for c in lit)
