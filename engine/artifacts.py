@@ -58,7 +58,6 @@ import dataclasses
 import hashlib
 import json
 import os
-import tempfile
 import tomllib
 import zipfile
 from dataclasses import dataclass, field
@@ -326,19 +325,12 @@ def save_artifacts(path, artifacts: Artifacts, *, scene_name: str = "",
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
         raise ArtifactError(f"Cannot save the maps to '{path}': the folder '{folder}' does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            (np.savez_compressed if compress else np.savez)(fh, **entries)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
+    from .imageio import atomic_output
+
+    with atomic_output(path) as tmp, open(tmp, "wb") as fh:
+        (np.savez_compressed if compress else np.savez)(fh, **entries)
+        fh.flush()
+        os.fsync(fh.fileno())
 
 
 # --- Load --------------------------------------------------------------------------------------

@@ -12,15 +12,8 @@ def _modules():
 
 
 def register():
-    done = []
-    try:
-        for module in _modules():
-            module.register()
-            done.append(module)
-    except Exception:
-        for module in reversed(done):
-            module.unregister()
-        raise
+    from ..engine.blender.registration import register_modules
+    register_modules(_modules())
 
 
 def unregister():

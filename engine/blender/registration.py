@@ -39,19 +39,25 @@ def is_registered() -> bool:
     return _registered
 
 
-def register():
-    global _registered
-    if _registered:
-        return
+def register_modules(modules) -> None:
+    """``register()`` each module in order; if one fails, unregister those done, in reverse,
+    and re-raise (nothing is left half-registered)."""
     done = []
     try:
-        for module in _modules():
+        for module in modules:
             module.register()
             done.append(module)
     except Exception:
         for module in reversed(done):
             module.unregister()
         raise
+
+
+def register():
+    global _registered
+    if _registered:
+        return
+    register_modules(_modules())
     _registered = True
 
 
