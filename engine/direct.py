@@ -150,12 +150,15 @@ def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.
     start = accel.offset_origins(org, normals, dirs, eps=eps)
     finite = np.isfinite(dist)
     # Rays to points and to lights that are not geometry: stop an offset short of the light.
+    # The start moved up to eps towards the light (straight at it under normal incidence),
+    # so the ray stops 2 eps short of ``dist``: a light touching or lying in a surface (a
+    # panel flush with the ceiling) is not shadowed by that surface (it was, below it).
     if finite.all():
-        far = np.subtract(dist, eps, dtype=np.float32)
+        far = np.subtract(dist, 2.0 * eps, dtype=np.float32)
     else:
         far = np.full(len(org), 1e37, np.float32)
         if finite.any():
-            far[finite] = dist[finite] - eps[finite]
+            far[finite] = dist[finite] - 2.0 * eps[finite]
     # Rays to emissive meshes end on geometry of the BVH: aim from the offset origin at the
     # sampled point itself and stop short of it by its own offset, so that neither the
     # receiver nor the emitter shadows the ray.
@@ -166,6 +169,11 @@ def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.
         length = np.sqrt(np.einsum("ij,ij->i", towards, towards))
         dirs[aim] = towards / np.maximum(length, 1e-30)[:, None]
         far[aim] = length - 2.0 * accel.offset_distance(light_point)
+    # Then eps along the ray as well: a point on a concave edge (the foot of a box on the
+    # floor) is pushed along its own normal into the other surface's plane, where Embree
+    # reports that surface at t = 0; moving along the ray leaves it (for rays that leave it).
+    start += sampling.scale_rows(dirs, eps.astype(dirs.dtype))
+    far -= eps.astype(far.dtype)
     if ray_log is not None:
         ray_log.append(("shadow", start, dirs, far))
     t0 = time.perf_counter()
@@ -174,7 +182,10 @@ def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.
 
     # One term per light group: its weights for the rays that got through.
     visible = ~blocked
-    visible &= far > 0
+    # A light nearer than the offsets (an emitting wall met at a corner or an edge, within
+    # 2 eps of the point): nothing can lie between the two, so it is visible, not dropped
+    # (dropped, a point 1e-7 m from the edge of a glowing box got half its light).
+    visible |= far <= 0
     terms = []
     offset = 0
     for group in groups:

@@ -45,6 +45,7 @@ import numpy as np
 from . import sampling
 
 LOOKUP_NEIGHBOURS = 4       # nearest estimates inspected for one with an agreeing normal
+DISC_THICKNESS = 0.25       # a look-up's disc, as the photon estimate's (photons.py)
 GUIDE_PHOTONS = 128         # nearby photons whose directions steer a guided gather
 GATHER_RAYS_PER_CALL = 1 << 19   # rays in flight per chunk of final_gather (~150 B a ray)
 LUMA = np.array([0.2126, 0.7152, 0.0722])
@@ -59,6 +60,7 @@ class RadianceEstimates:
     irradiance: np.ndarray          # (Q, 3) float32 [W/m^2]
     stats: dict = field(default_factory=dict)
     _tree: object = None
+    max_radius: float = np.inf      # the photon estimate's radius cap [m]: bounds a look-up
 
     def __len__(self):
         return len(self.positions)
@@ -91,7 +93,8 @@ class RadianceEstimates:
 
         parts = list(pool.map(estimate, chunks)) if pool is not None else [estimate(c) for c in chunks]
         irradiance = np.concatenate(parts).astype(np.float32)
-        out = cls(positions.astype(np.float32), normals.astype(np.float32), irradiance)
+        out = cls(positions.astype(np.float32), normals.astype(np.float32), irradiance,
+                  max_radius=float(max_radius))
         from pykdtree.kdtree import KDTree
         out._tree = KDTree(out.positions, leafsize=16)
         out.stats = {"estimates": wanted, "fraction": wanted / total, "k": k,
@@ -100,15 +103,31 @@ class RadianceEstimates:
 
     def lookup(self, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
         """Irradiance (N, 3) of the nearest estimate whose normal agrees with ``normals``
-        (n . n_i > 0.5) among the ``LOOKUP_NEIGHBOURS`` nearest; 0 where none does."""
+        (n . n_i > 0.5) among the ``LOOKUP_NEIGHBOURS`` nearest; 0 where none does. With a
+        finite ``max_radius`` only estimates within it and within ``DISC_THICKNESS`` x it of
+        the point's tangent plane count, as photons in the estimate's disc (Fig. 9.5): a
+        surface without photons nearby (the floor under a closed lamp shade) must not take
+        the irradiance of the far side of a shell."""
         out = np.zeros((len(points), 3), np.float32)
         if self._tree is None or len(points) == 0:
             return out
         kk = int(min(LOOKUP_NEIGHBOURS, len(self)))
-        _dist, idx = self._tree.query(np.ascontiguousarray(points, np.float32), k=kk)
+        pts32 = np.ascontiguousarray(points, np.float32)
+        bounded = bool(np.isfinite(self.max_radius))
+        if bounded:
+            _dist, idx = self._tree.query(pts32, k=kk, distance_upper_bound=float(self.max_radius))
+        else:
+            _dist, idx = self._tree.query(pts32, k=kk)
         idx = idx.reshape(len(points), kk).astype(np.int64)
-        agree = np.einsum("nkj,nj->nk", np.take(self.normals, idx.reshape(-1), axis=0)
-                          .reshape(len(points), kk, 3), normals.astype(np.float32)) > 0.5
+        found = idx < len(self)
+        idx = np.where(found, idx, 0)
+        nrm = normals.astype(np.float32)
+        agree = found & (np.einsum("nkj,nj->nk", np.take(self.normals, idx.reshape(-1), axis=0)
+                                   .reshape(len(points), kk, 3), nrm) > 0.5)
+        if bounded:
+            offset = np.take(self.positions, idx.reshape(-1), axis=0).reshape(len(points), kk, 3)
+            offset -= pts32[:, None, :]
+            agree &= np.abs(np.einsum("nkj,nj->nk", offset, nrm)) <= DISC_THICKNESS * self.max_radius
         first = np.argmax(agree, axis=1)
         found = agree[np.arange(len(points)), first]
         chosen = idx[np.arange(len(points)), first]

@@ -197,6 +197,12 @@ def emit_photons(scene: Scene, count: int, rng: np.random.Generator) -> EmittedP
             t, b = sampling.orthonormal_basis(d)
             disk = sampling.square_to_disk(v) * radius
             o = center - d * (2 * radius) + disk[:, 0:1] * t + disk[:, 1:2] * b
+        if kind in ("point", "spot", "area"):
+            # Start an offset away from the light, as shadow rays stop short of it: a light
+            # touching or lying in a surface (a panel flush with the ceiling) sends its photons
+            # into the room instead of onto that surface's far side at t = 0.
+            away = normal if kind == "area" else d
+            o = o + away * offset_distance(o, scene.extent)[:, None]
         origins.append(o); directions.append(d); powers.append(power)
         per_light[name] = int(n)
     return EmittedPhotons(np.concatenate(origins), np.concatenate(directions),

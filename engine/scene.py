@@ -42,12 +42,27 @@ class SceneError(ValueError):
     """Raised for input that cannot be rendered; the message names the object and the problem."""
 
 
+# Embree intersects in float32 and multiplies three coordinates together: beyond about
+# cbrt(3.4e38) = 7e12 m its products overflow and rays miss (measured: a ray from 1e11 m
+# hits a triangle with corners at 1e12 m; one from 1e12 m misses a triangle with corners at
+# 1e13 m; at 1e19 m every ray misses). Triangles with a corner farther out are skipped.
+MAX_COORDINATE = 1e12
+# Powers, exitances, reflectances: a photon's power, k of them summed over a disc of radius
+# r and the pixels are float32 (3.4e38). Measured: a 1e36 W light still renders exactly
+# (linear in the power), 1e38 W is 18 % off, 1e40 W gives inf and NaN. 1e30 keeps 1e8 of
+# headroom, the factor 1 / r^2 of a light 1e-4 m from a surface.
+MAX_VALUE = 1e30
+
+
 def _rgb(value, name: str, what: str) -> np.ndarray:
     arr = np.broadcast_to(np.asarray(value, dtype=np.float64), (3,)).copy()
     if not np.all(np.isfinite(arr)):
         raise SceneError(f"{name}: {what} is not finite ({arr.tolist()})")
     if np.any(arr < 0):
         raise SceneError(f"{name}: {what} is negative ({arr.tolist()})")
+    if np.any(arr > MAX_VALUE):
+        raise SceneError(f"{name}: {what} {arr.tolist()} is beyond {MAX_VALUE:g}, where the "
+                         "renderer's float32 arithmetic overflows")
     return arr
 
 
@@ -345,6 +360,7 @@ class Scene:
             if tris is None:
                 raise SceneError("Scene: triangles must have shape (T, 3, 3)")
         count = len(tris)
+        self._check_materials()
         mids = np.asarray(self.material_ids, dtype=np.int32).reshape(-1)
         if len(mids) != count:
             raise SceneError(f"Scene: {len(mids)} material ids for {count} triangles")
@@ -363,11 +379,18 @@ class Scene:
         with np.errstate(invalid="ignore", over="ignore"):
             cross = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
             doubled_area_sq = np.einsum("ij,ij->i", cross, cross)
-        scale = float(np.max(np.abs(tris[finite]), initial=1.0)) if count else 1.0
-        # Zero area, or so small against the coordinates that float32 cannot resolve it.
-        keep = finite & (doubled_area_sq > (scale * 1e-7) ** 4)
+        # Each triangle against its own coordinates (one far-away triangle must not make the
+        # others "too small"): zero area, or so small that float32 cannot resolve it.
+        with np.errstate(invalid="ignore"):
+            scale = np.max(np.abs(np.where(np.isfinite(tris), tris, 0)), axis=(1, 2),
+                           initial=0.0).astype(np.float64)
+        in_range = finite & (scale <= MAX_COORDINATE)
+        keep = in_range & (doubled_area_sq > (scale * 1e-7) ** 4)
         if count and not np.all(keep):
-            for reason, mask in (("non-finite vertices", ~finite), ("zero area", finite & ~keep)):
+            for reason, mask in (("non-finite vertices", ~finite),
+                                 (f"vertices beyond {MAX_COORDINATE:g} m (float32 overflow)",
+                                  finite & ~in_range),
+                                 ("zero area", in_range & ~keep)):
                 if np.any(mask):
                     names = sorted({self.object_names[i] if 0 <= i < len(self.object_names) else "?"
                                     for i in np.unique(oids[mask])})
@@ -389,6 +412,24 @@ class Scene:
                 normals = normals / lengths[..., None]
             self.shading_normals = np.ascontiguousarray(normals, dtype=np.float32)
         return self
+
+    def _check_materials(self):
+        """The materials again (their fields can be set after construction): finite and >= 0,
+        else SceneError naming the material. Where rho_d + rho_s > 1 in a channel both are
+        scaled down in that channel, with a warning: such a surface would reflect more than it
+        receives (photons gain power at every bounce, a closed room never converges)."""
+        for m in self.materials:
+            who = f"Material '{m.name}'"
+            m.diffuse = _rgb(m.diffuse, who, "diffuse reflectance")
+            m.specular = _rgb(m.specular, who, "specular reflectance")
+            m.exitance = _rgb(m.exitance, who, "radiant exitance")
+            total = m.diffuse + m.specular
+            if np.any(total > 1.0 + 1e-6):
+                self.warnings.append(f"{who}: diffuse + specular reflectance "
+                                     f"{np.round(total, 4).tolist()} exceeds 1; scaled down "
+                                     "to conserve energy")
+                scale = 1.0 / np.maximum(total, 1.0)
+                m.diffuse, m.specular = m.diffuse * scale, m.specular * scale
 
     # Derived quantities ----------------------------------------------------------------------
     def geometric_normals(self) -> np.ndarray:

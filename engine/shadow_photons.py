@@ -205,9 +205,9 @@ def _emit(light, n: int, rng: np.random.Generator, accel):
         nrm = light.normals[tri].copy()
         if light.two_sided:
             nrm[rng.random(n) < 0.5] *= -1
-        if getattr(light, "in_bvh", False):
-            # The emitter is geometry too: leave its surface as accel.offset_origins does.
-            o = o + nrm * accel.offset_distance(o)[:, None]
+    # Leave the emitter's plane as accel.offset_origins does: an emissive mesh is geometry
+    # too, and an area light may lie in a surface (a panel flush with the ceiling).
+    o = o + nrm * accel.offset_distance(o)[:, None]
     d = sampling.cosine_directions(nrm, v)
     return o, d
 
