@@ -47,6 +47,7 @@ from bpy_extras.io_utils import ImportHelper
 from mathutils import Matrix
 
 from ..engine import ase
+from ..engine.blender import compat
 
 __all__ = ["LANTERNA_OT_import_ase", "import_ase", "register", "unregister"]
 
@@ -65,10 +66,7 @@ def _make_material(spec: ase.MaterialSpec):
         settings.specular = s.tolist()
         settings.exitance = e.tolist()
     mat.diffuse_color = (*d.tolist(), 1.0)
-    tree = mat.node_tree
-    if tree is None:                      # Blender < 5: nodes are opt-in
-        mat.use_nodes = True
-        tree = mat.node_tree
+    tree = compat.ensure_node_tree(mat)
     bsdf = next((n for n in tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled"), None)
     if bsdf is not None:
         base = np.clip(d + s, 0.0, 1.0)

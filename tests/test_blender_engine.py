@@ -13,7 +13,7 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 from lanterna.engine import imageio, pipeline  # noqa: E402
-from lanterna.engine.blender import export, registration, render_engine  # noqa: E402
+from lanterna.engine.blender import compat, export, registration, render_engine  # noqa: E402
 from lanterna.engine.scene import SceneError  # noqa: E402
 
 ENGINE = "LANTERNA"
@@ -59,7 +59,7 @@ def quad(scene, name, corners, color=(0.8, 0.8, 0.8)):
     mesh = bpy.data.meshes.new(name)
     mesh.from_pydata([tuple(c) for c in corners], [], [(0, 1, 2, 3)])
     mat = bpy.data.materials.new(name)
-    bsdf = mat.node_tree.nodes.get("Principled BSDF")
+    bsdf = compat.ensure_node_tree(mat).nodes.get("Principled BSDF")
     bsdf.inputs["Base Color"].default_value = (*color, 1.0)
     mesh.materials.append(mat)
     obj = bpy.data.objects.new(name, mesh)
@@ -83,7 +83,7 @@ def upper_wall_scene(width=32, height=24, samples=4, seed=3):
     light.location = (0.5, 1.0, 1.0)
     scene.collection.objects.link(light)
     world = bpy.data.worlds.new("Black")
-    for node in world.node_tree.nodes:
+    for node in compat.ensure_node_tree(world).nodes:
         if node.bl_idname == "ShaderNodeBackground":
             node.inputs["Color"].default_value = (0, 0, 0, 1)
     scene.world = world

@@ -31,7 +31,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from lanterna.engine.blender import export, registration, render_engine  # noqa: E402
+from lanterna.engine.blender import compat, export, registration, render_engine  # noqa: E402
 from lanterna.engine.lights import LightSet  # noqa: E402
 from lanterna.engine.scene import AreaLight, PointLight  # noqa: E402
 from lanterna.ui import panels, properties  # noqa: E402
@@ -183,7 +183,7 @@ def build_scene(light_type='AREA'):
     light.data.energy = 200.0
     scene.collection.objects.link(light)
     world = bpy.data.worlds.new("Black")
-    for node in world.node_tree.nodes:
+    for node in compat.ensure_node_tree(world).nodes:
         if node.bl_idname == "ShaderNodeBackground":
             node.inputs["Color"].default_value = (0, 0, 0, 1)
     scene.world = world
@@ -296,7 +296,7 @@ def test_every_panel_polls_only_for_lanterna(registered):
     scene.render.engine = ENGINE
     assert bpy.context.engine == ENGINE
     assert all(cls.poll(bpy.context) for cls in render_panels)
-    for engine in ("CYCLES", "BLENDER_EEVEE", "BLENDER_WORKBENCH"):
+    for engine in ("CYCLES", compat.eevee_engine_id(), "BLENDER_WORKBENCH"):
         scene.render.engine = engine
         assert bpy.context.engine == engine
         assert not any(cls.poll(bpy.context) for cls in render_panels), engine
@@ -433,7 +433,7 @@ def test_radiometry_panel_alerts_on_the_channels_over_one(registered):
 def test_radiometry_panel_shows_the_exporters_derived_values(registered):
     scene, obj, mat, light, world, cam = build_scene()
     ctx = context_for(scene, material=mat)
-    bsdf = mat.node_tree.nodes["Principled BSDF"]
+    bsdf = compat.ensure_node_tree(mat).nodes["Principled BSDF"]
     bsdf.inputs["Base Color"].default_value = (0.2, 0.4, 0.6, 1.0)
     bsdf.inputs["Metallic"].default_value = 0.5
     bsdf.inputs["Roughness"].default_value = 0.0

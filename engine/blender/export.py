@@ -105,13 +105,13 @@ import dataclasses
 import math
 import os
 import time
-import warnings as _py_warnings
 
 import numpy as np
 
 import bpy
 
 from ..pipeline import RenderSettings
+from . import compat
 from ..scene import (AREA_SHAPES, AreaLight, Camera, Material, PointLight, Scene, SceneError,
                      SpotLight, SunLight, World)
 
@@ -493,10 +493,7 @@ def material_from_nodes(mat, warn=None) -> Material:
     warn = warn if warn is not None else _Warnings()
     name = mat.name
     tree = mat.node_tree
-    with _py_warnings.catch_warnings():   # Material.use_nodes is deprecated in Blender 5
-        _py_warnings.simplefilter("ignore", DeprecationWarning)
-        use_nodes = tree is not None and getattr(mat, "use_nodes", True)
-    if not use_nodes:
+    if not compat.uses_nodes(mat):
         # Cycles renders a node-less material as a Diffuse BSDF of the viewport colour.
         d, s, e = _clamp_reflectances(name, mat.diffuse_color[:3], (0, 0, 0), (0, 0, 0), warn)
         return Material(name, diffuse=d, specular=s, exitance=e)
@@ -524,7 +521,7 @@ def _convert_light(name: str, light, matrix: np.ndarray, warn: _Warnings):
     colour = np.array(light.color[:3], float)
     if getattr(light, "use_temperature", False):
         colour = colour * np.array(light.temperature_color[:3], float)
-    power = colour * float(light.energy) * 2.0 ** float(getattr(light, "exposure", 0.0))
+    power = colour * float(light.energy) * 2.0 ** compat.light_exposure(light)
     if not np.all(np.isfinite(power)):
         raise SceneError(f"Light '{name}': power {_fmt(power)} is not finite")
     if np.all(power == 0):
@@ -537,7 +534,7 @@ def _convert_light(name: str, light, matrix: np.ndarray, warn: _Warnings):
                          f"location, rotation or scale)")
     if getattr(light, "use_nodes", False) and light.node_tree is not None:
         warn(f"Light '{name}': light nodes are ignored; using Color x Power")
-    normalize = getattr(light, "normalize", True)
+    normalize = compat.light_normalized(light)
     position = matrix[:3, 3]
     down = -matrix[:3, 2]          # the light's local -Z in world space
     kind = light.type
@@ -613,10 +610,7 @@ def _export_world(world, warn: _Warnings) -> World:
     if world is None:
         return World()
     tree = world.node_tree
-    with _py_warnings.catch_warnings():   # World.use_nodes is deprecated in Blender 5
-        _py_warnings.simplefilter("ignore", DeprecationWarning)
-        use_nodes = tree is not None and getattr(world, "use_nodes", True)
-    if not use_nodes:
+    if not compat.uses_nodes(world):
         radiance = np.array(world.color[:3], float)
     else:
         reader = _NodeReader(f"World '{world.name}'", warn)

@@ -27,6 +27,8 @@ import bpy
 import numpy as np
 from mathutils import Vector
 
+from . import compat
+
 __all__ = ["build_scene1", "build_scene2", "build", "save", "SCENES"]
 
 WHITE = (0.8, 0.8, 0.8)
@@ -64,10 +66,7 @@ def _material(name: str, color) -> bpy.types.Material:
     """A Lambertian material: Diffuse BSDF of ``color`` into the Material Output."""
     mat = bpy.data.materials.new(name)
     mat.diffuse_color = (*color, 1.0)
-    tree = mat.node_tree
-    if tree is None:  # Blender < 5: nodes are opt-in
-        mat.use_nodes = True
-        tree = mat.node_tree
+    tree = compat.ensure_node_tree(mat)
     nodes = tree.nodes
     for node in list(nodes):
         if node.bl_idname != "ShaderNodeOutputMaterial":
@@ -89,9 +88,7 @@ def _material(name: str, color) -> bpy.types.Material:
 def _black_world(scene: bpy.types.Scene) -> None:
     world = bpy.data.worlds.new("Black")
     world.color = (0.0, 0.0, 0.0)
-    if world.node_tree is None:
-        world.use_nodes = True
-    for node in world.node_tree.nodes:
+    for node in compat.ensure_node_tree(world).nodes:
         if node.bl_idname == "ShaderNodeBackground":
             node.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
             node.inputs["Strength"].default_value = 0.0

@@ -1,0 +1,109 @@
+"""What differs between the Blender versions Lanterna supports (4.2 LTS, 4.5 LTS and 5.0), in one
+place. Everything else in Lanterna uses an API that is the same in all three.
+
+``bpy`` is imported lazily, so that this module loads without Blender (and, having no imports of
+its own package, also on its own by file path, as the extension test does).
+
+* ``ensure_node_tree(id_block)`` / ``uses_nodes(id_block)``: a new material or world has a node
+  tree from 5.0 on and always renders through it (``use_nodes`` is deprecated there); in 4.2
+  and 4.5 nodes are opt-in (``use_nodes = True`` creates the tree) and a block with
+  ``use_nodes`` off renders with its viewport colour.
+* ``light_exposure(light)`` / ``light_normalized(light)``: ``Light.exposure`` (power x
+  2^exposure) and ``Light.normalize`` (off: power per square metre of an area light) came after
+  4.2; there every light has exposure 0 and is normalized.
+* ``eevee_engine_id()``: EEVEE's engine id is ``'BLENDER_EEVEE_NEXT'`` in 4.2 and 4.5 and
+  ``'BLENDER_EEVEE'`` again in 5.0.
+* ``multilayer_exr(image_settings)``: 5.0 made "multilayer" a media type
+  (``ImageFormatSettings.media_type = 'MULTI_LAYER_IMAGE'``) that must be set before
+  ``file_format = 'OPEN_EXR_MULTILAYER'`` is accepted; 4.2 and 4.5 have no ``media_type``.
+* ``exit_process(code)``: ``bpy`` *as a Python module* before 5.0 cannot end a process once an
+  add-on has registered a property with a Python ``update`` callback (Lanterna's properties
+  have them): at interpreter exit bpy 4.2 crashes (SIGSEGV: ``SpaceType``'s C++ destructor calls
+  ``PyGILState_Ensure`` after Python has been finalised) and bpy 4.5 hangs (a static
+  destructor waits on a condition variable forever), unregistering first or not. Blender itself
+  exits through its own path and is not affected. So a process that imported ``bpy`` ends
+  with ``os._exit`` there (after flushing output and removing Blender's session temp folder);
+  on 5.0 and without ``bpy`` it ends normally.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import sys
+
+__all__ = ["blender_version", "ensure_node_tree", "uses_nodes", "light_exposure",
+           "light_normalized", "eevee_engine_id", "multilayer_exr", "module_exit_is_unsafe",
+           "exit_process"]
+
+
+def blender_version() -> tuple[int, int, int]:
+    import bpy
+
+    return tuple(bpy.app.version)
+
+
+def ensure_node_tree(id_block):
+    """The node tree of a material or world, switched on first where nodes are opt-in."""
+    if id_block.node_tree is None:                      # 4.2, 4.5
+        id_block.use_nodes = True
+    return id_block.node_tree
+
+
+def uses_nodes(id_block) -> bool:
+    """Whether a material or world renders through its node tree."""
+    if id_block.node_tree is None:
+        return False
+    if blender_version() >= (5, 0, 0):                  # use_nodes: deprecated, always on
+        return True
+    return bool(id_block.use_nodes)
+
+
+def light_exposure(light) -> float:
+    """``Light.exposure`` in stops (0 where Blender has none)."""
+    return float(getattr(light, "exposure", 0.0))
+
+
+def light_normalized(light) -> bool:
+    """``Light.normalize`` (always on where Blender has no such switch)."""
+    return bool(getattr(light, "normalize", True))
+
+
+def eevee_engine_id() -> str:
+    """EEVEE's id in ``RenderSettings.engine`` of the running Blender."""
+    import bpy
+
+    engines = bpy.types.RenderSettings.bl_rna.properties["engine"].enum_items.keys()
+    return "BLENDER_EEVEE_NEXT" if "BLENDER_EEVEE_NEXT" in engines else "BLENDER_EEVEE"
+
+
+def multilayer_exr(image_settings) -> None:
+    """Make ``image_settings`` (a ``bpy.types.ImageFormatSettings``) write multilayer EXR."""
+    if hasattr(image_settings, "media_type"):          # 5.0 and later
+        image_settings.media_type = 'MULTI_LAYER_IMAGE'
+    image_settings.file_format = 'OPEN_EXR_MULTILAYER'
+
+
+def module_exit_is_unsafe() -> bool:
+    """True in a process that imported bpy < 5.0 as a module (see the module docstring)."""
+    bpy = sys.modules.get("bpy")
+    if bpy is None or not hasattr(bpy, "app"):
+        return False
+    return tuple(bpy.app.version) < (5, 0, 0) and not bpy.app.binary_path
+
+
+def exit_process(code: int = 0):
+    """End the process with ``code``; past bpy 4.2/4.5's broken module exit where it applies."""
+    code = code if isinstance(code, int) else (0 if code is None else 1)
+    if not module_exit_is_unsafe():
+        sys.exit(code)
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (AttributeError, OSError, ValueError):
+            pass
+    import bpy
+
+    tempdir = bpy.app.tempdir                  # Blender's per-session folder, removed at exit
+    if tempdir and os.path.basename(os.path.normpath(tempdir)).startswith("blender_"):
+        shutil.rmtree(tempdir, ignore_errors=True)
+    os._exit(code)
