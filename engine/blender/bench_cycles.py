@@ -233,6 +233,64 @@ def measure_denoise_seconds(scene, configure, render_exr, tmpdir, name) -> float
     return max(min(times[True]) - min(times[False]), 0.0)
 
 
+def warm_up_cycles(bscene, configure, render_exr, tmpdir, warm: dict) -> None:
+    """One 1-sample Cycles render per process, not timed, to load the kernels first; ``warm``
+    (a dict kept across scenes) remembers that it ran."""
+    if warm.get("done"):
+        return
+    configure(bscene, 1, CYCLES_SEED, gi=True)
+    try:
+        with _blender_output_to(os.path.join(tmpdir, "blender.log")):
+            render_exr(bscene, os.path.join(tmpdir, "warm.exr"))
+    except Exception:  # noqa: BLE001 - the real renders after it report the failure
+        pass
+    warm["done"] = True
+
+
+def cycles_curve(bscene, name, resolution, cycles_samples, cycles, tmpdir, warm: dict) -> dict:
+    """Cycles on ``bscene`` (already at ``resolution`` (W, H)) at each of ``cycles_samples``:
+    one render per sample count with OIDN on (``render_with_noisy_pass``), after the warm-up
+    and the denoiser's own time (``measure_denoise_seconds``). Returns {"denoise_seconds",
+    "rows": two per sample count (denoiser False: the render's time less the denoiser's;
+    True: the render's time), "images": {("cycles", spp, denoiser): (H, W, 3) float64},
+    "failures": [text]}; a failed render prints one ``lanterna bench: error:`` line."""
+    configure, render_exr, _source = cycles
+    w, h = resolution
+    warm_up_cycles(bscene, configure, render_exr, tmpdir, warm)
+    # The denoiser's own time: a 1-spp render with and without it (warm), the difference.
+    denoise_seconds = measure_denoise_seconds(bscene, configure, render_exr, tmpdir, name)
+    rows, images, failures = [], {}, []
+    for spp in cycles_samples:
+        label = f"Cycles {spp} spp (+ OIDN)"
+        _log(f"{name}: {label} ...")
+        configure(bscene, spp, CYCLES_SEED, gi=True)
+        try:
+            with _blender_output_to(os.path.join(tmpdir, "blender.log")):
+                den_settings = set_denoiser(bscene)
+                passes, dt = render_with_noisy_pass(bscene, os.path.join(tmpdir, f"{name}_{spp}.exr"))
+        except Exception as exc:  # noqa: BLE001
+            msg = f"{name}: {label} failed: {' '.join(str(exc).split())}"
+            print(f"lanterna bench: error: {msg}", file=sys.stderr)
+            failures.append(msg)
+            continue
+        noisy, denoised = passes["Noisy Image"], passes["Combined"]
+        if noisy.shape[:2] != (h, w):
+            failures.append(f"{name}: {label}: image {noisy.shape[1]}x{noisy.shape[0]}")
+            continue
+        images[("cycles", spp, False)] = noisy
+        images[("cycles", spp, True)] = denoised
+        common = {"method": "Cycles", "samples": spp, "seed": CYCLES_SEED,
+                  "threads": bscene.render.threads, "render_seconds_with_oidn": dt}
+        rows.append({**common, "denoiser": False,
+                     "seconds": max(dt - denoise_seconds, 0.0),
+                     "seconds_note": "the render's time less the denoiser's"})
+        rows.append({**common, "denoiser": True, "seconds": dt,
+                     "denoiser_settings": den_settings,
+                     "denoiser_changed_image": bool(np.abs(denoised - noisy).max() > 0)})
+    return {"denoise_seconds": denoise_seconds, "rows": rows, "images": images,
+            "failures": failures}
+
+
 # -- Errors --------------------------------------------------------------------------------------
 def block_means(image: np.ndarray, grid=GRID) -> np.ndarray:
     """(H, W, C) -> (GY, GX) means over equal blocks and the channels."""
@@ -318,11 +376,28 @@ def rendered_reference(name, bscene, resolution, samples, configure, render_exr,
 
 
 # -- One scene -----------------------------------------------------------------------------------
+def build_seed_scene(name: str, resolution):
+    """The seed scene ``name`` built in bpy (``seed_scenes.build``) at ``resolution`` (W, H),
+    100 %; a scene that cannot be built is a ``BenchError``."""
+    import bpy
+
+    from . import seed_scenes
+
+    w, h = resolution
+    try:
+        bscene = seed_scenes.build(name)
+        bscene.render.resolution_x, bscene.render.resolution_y = w, h
+        bscene.render.resolution_percentage = 100
+        bpy.context.view_layer.update()
+    except Exception as exc:  # noqa: BLE001 - reported as one line
+        raise BenchError(f"scene {name!r} cannot be built: {' '.join(str(exc).split())}") from None
+    return bscene
+
+
 def bench_scene(name, resolution, cycles_samples, reference_samples, cycles, tmpdir,
                 warm: dict, compare=None) -> dict:
     import bpy
 
-    from . import seed_scenes
     from .export import export_scene
     from ..pipeline import RenderSettings, render
     from ..scene import SceneError
@@ -331,13 +406,7 @@ def bench_scene(name, resolution, cycles_samples, reference_samples, cycles, tmp
     w, h = resolution
     compare = tuple(compare or resolution)
     factor = w // compare[0]
-    try:
-        bscene = seed_scenes.build(name)
-        bscene.render.resolution_x, bscene.render.resolution_y = w, h
-        bscene.render.resolution_percentage = 100
-        bpy.context.view_layer.update()
-    except Exception as exc:  # noqa: BLE001 - reported as one line
-        raise BenchError(f"scene {name!r} cannot be built: {' '.join(str(exc).split())}") from None
+    bscene = build_seed_scene(name, (w, h))
 
     out = {"scene": name, "resolution": [w, h], "compare_at": list(compare),
            "downsample_factor": factor, "rows": [], "failures": []}
@@ -364,44 +433,11 @@ def bench_scene(name, resolution, cycles_samples, reference_samples, cycles, tmp
         "peak_memory_mb": rep.get("peak_memory_mb")})
 
     # Cycles
-    if not warm.get("done"):
-        configure(bscene, 1, CYCLES_SEED, gi=True)
-        try:
-            with _blender_output_to(os.path.join(tmpdir, "blender.log")):
-                render_exr(bscene, os.path.join(tmpdir, "warm.exr"))
-        except Exception:  # noqa: BLE001 - the real renders below report the failure
-            pass
-        warm["done"] = True
-    # The denoiser's own time: a 1-spp render with and without it (warm), the difference.
-    denoise_seconds = measure_denoise_seconds(bscene, configure, render_exr, tmpdir, name)
-    out["denoise_seconds"] = denoise_seconds
-    for spp in cycles_samples:
-        label = f"Cycles {spp} spp (+ OIDN)"
-        _log(f"{name}: {label} ...")
-        configure(bscene, spp, CYCLES_SEED, gi=True)
-        try:
-            with _blender_output_to(os.path.join(tmpdir, "blender.log")):
-                den_settings = set_denoiser(bscene)
-                passes, dt = render_with_noisy_pass(bscene, os.path.join(tmpdir, f"{name}_{spp}.exr"))
-        except Exception as exc:  # noqa: BLE001
-            msg = f"{name}: {label} failed: {' '.join(str(exc).split())}"
-            print(f"lanterna bench: error: {msg}", file=sys.stderr)
-            out["failures"].append(msg)
-            continue
-        noisy, denoised = passes["Noisy Image"], passes["Combined"]
-        if noisy.shape[:2] != (h, w):
-            out["failures"].append(f"{name}: {label}: image {noisy.shape[1]}x{noisy.shape[0]}")
-            continue
-        images[("cycles", spp, False)] = noisy
-        images[("cycles", spp, True)] = denoised
-        common = {"method": "Cycles", "samples": spp, "seed": CYCLES_SEED,
-                  "threads": bscene.render.threads, "render_seconds_with_oidn": dt}
-        out["rows"].append({**common, "denoiser": False,
-                            "seconds": max(dt - denoise_seconds, 0.0),
-                            "seconds_note": "the render's time less the denoiser's"})
-        out["rows"].append({**common, "denoiser": True, "seconds": dt,
-                            "denoiser_settings": den_settings,
-                            "denoiser_changed_image": bool(np.abs(denoised - noisy).max() > 0)})
+    curve = cycles_curve(bscene, name, (w, h), cycles_samples, cycles, tmpdir, warm)
+    out["denoise_seconds"] = curve["denoise_seconds"]
+    out["rows"].extend(curve["rows"])
+    out["failures"].extend(curve["failures"])
+    images.update(curve["images"])
     out["cycles_settings"] = {k: v for k, v in configure(bscene, 1, CYCLES_SEED, gi=True).items()
                               if k not in ("samples", "seed")}
 
