@@ -10,6 +10,7 @@ greyed out; so are settings the current mode or method does not use.
 Render (``scene.lanterna``)
     ``LANTERNA_RENDER_PT_sampling``            preset, mode, samples, light samples, bounces
       ``LANTERNA_RENDER_PT_sampling_advanced``   seed, threads
+      ``LANTERNA_RENDER_PT_estimate``            estimated time and memory per stage
     ``LANTERNA_RENDER_PT_photons``             photon count, k per estimate, max radius,
                                                 filter, look-ups per pixel (seed 9.2-9.5)
     ``LANTERNA_RENDER_PT_indirect``            how full mode computes indirect light
@@ -161,6 +162,52 @@ class LANTERNA_RENDER_PT_sampling_advanced(LanternaRenderPanel, bpy.types.Panel)
         col = layout.column(align=True)
         col.prop(settings, "seed")
         col.prop(settings, "threads", text="Threads (0 = All Cores)")
+
+
+class LANTERNA_RENDER_PT_estimate(LanternaRenderPanel, bpy.types.Panel):
+    """Issue 6: the estimated time and memory of each stage for the current settings, before
+    rendering (``engine/estimate.py``). The scene's facts are cached under a cheap depsgraph
+    signature and the estimate recomputed from them at each redraw
+    (``engine/blender/calibrate.py``, ``panel_estimate``)."""
+    bl_label = "Estimate"
+    bl_parent_id = "LANTERNA_RENDER_PT_sampling"
+
+    def draw(self, context):
+        from ..engine.blender.calibrate import panel_estimate
+        from ..engine.estimate import DEFAULT_RATES_PATH, GIB, format_bytes, format_seconds
+
+        layout = self.layout
+        estimate, note = panel_estimate(context)
+        if estimate is None:
+            _wrap(layout, note or "No estimate", context, icon='INFO')
+            return
+        col = layout.column(align=True)
+        for stage in estimate.stages.values():
+            if stage.seconds < 0.005 and stage.keeps + stage.working < (1 << 20):
+                continue
+            row = col.row(align=True)
+            row.label(text=stage_title(stage.name))
+            row.label(text=format_seconds(stage.seconds))
+            row.label(text=format_bytes(stage.keeps + stage.working))
+        row = layout.row(align=True)
+        row.label(text="Total", icon='TIME')
+        row.label(text=format_seconds(estimate.seconds))
+        row.label(text=f"peak {format_bytes(estimate.peak_bytes)}")
+        available = estimate.available_bytes
+        if available is not None and estimate.peak_bytes > available:
+            _wrap(layout, f"A render would be refused: it needs about "
+                          f"{estimate.peak_bytes / GIB:.1f} GiB, {available / GIB:.1f} GiB is "
+                          "available", context, icon='ERROR', alert=True)
+        sub = layout.column(align=True)
+        sub.active = False
+        for text in [note] + list(estimate.warnings):
+            if text:
+                _wrap(sub, text, context)
+        if estimate.rates_source == str(DEFAULT_RATES_PATH):
+            _wrap(sub, "Rates: shipped with Lanterna; 'lanterna bench --calibrate' measures "
+                       "this machine's", context)
+        else:
+            _wrap(sub, f"Rates: this machine's ({estimate.rates_source})", context)
 
 
 # -- Render: photons --------------------------------------------------------------------------
@@ -639,6 +686,7 @@ class LANTERNA_WORLD_PT_surface(_SurfacePanel, bpy.types.Panel):
 classes = (
     LANTERNA_RENDER_PT_sampling,
     LANTERNA_RENDER_PT_sampling_advanced,
+    LANTERNA_RENDER_PT_estimate,
     LANTERNA_RENDER_PT_photons,
     LANTERNA_RENDER_PT_indirect,
     LANTERNA_RENDER_PT_final_gather,

@@ -27,7 +27,9 @@ figures.
 Parameters
     ``--resolution WxH`` (640x480), ``--samples N`` (16), ``--threads N`` (0 = all cores),
     ``--export-triangles N`` (1 000 000; 0 skips), ``--photons N`` (1 000 000; 0 skips the
-    photon benchmark), ``--json FILE``.
+    photon benchmark), ``--json FILE``. ``--calibrate`` (measure this machine's rates for the
+    cost estimate, then check it on the seed scenes) and ``--check-estimate`` (the check
+    alone) hand over to ``engine/blender/calibrate.py``.
 """
 from __future__ import annotations
 
@@ -225,6 +227,16 @@ def print_photons(out: dict) -> None:
 
 def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    if "--sweep" in argv:  # issue 6: quality sweep against a reference and Cycles (bench_sweep.py)
+        if "--vs-cycles" in argv:
+            print("lanterna bench: error: give either --sweep or --vs-cycles, not both",
+                  file=sys.stderr)
+            return 2
+        from .bench_sweep import main as sweep_main
+        return sweep_main([a for a in argv if a != "--sweep"])
+    if "--calibrate" in argv or "--check-estimate" in argv:  # issue 6: rates (calibrate.py)
+        from .calibrate import main as calibrate_main
+        return calibrate_main(argv)
     if "--vs-cycles" in argv:  # issue 4: the final preset against Cycles (bench_cycles.py)
         from .bench_cycles import main as vs_cycles_main
         return vs_cycles_main([a for a in argv if a != "--vs-cycles"])
@@ -232,6 +244,15 @@ def main(argv=None) -> int:
     parser.add_argument("--vs-cycles", action="store_true",
                         help="Lanterna's final preset against Cycles on the seed's scenes; "
                              "see engine/blender/bench_cycles.py (--vs-cycles --help)")
+    parser.add_argument("--sweep", action="store_true",
+                        help="a sweep over quality settings against a reference and Cycles; "
+                             "see engine/blender/bench_sweep.py (--sweep --help)")
+    parser.add_argument("--calibrate", action="store_true",
+                        help="measure this machine's rates for the cost estimate, write them "
+                             "and check the estimate on the seed scenes; see "
+                             "engine/blender/calibrate.py (--calibrate --help)")
+    parser.add_argument("--check-estimate", action="store_true",
+                        help="only check the cost estimate against renders of the seed scenes")
     parser.add_argument("--resolution", default="640x480")
     parser.add_argument("--samples", type=int, default=16)
     parser.add_argument("--threads", type=int, default=0)

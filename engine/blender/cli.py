@@ -9,7 +9,7 @@ Usage
     ``[--bounces N] [--seed N] [--threads N] [--mode full|photon-map] [--photons N]``
     ``[--photon-k N] [--photon-radius R] [--photon-filter none|cone] [--photon-lookups N]``
     ``[--preset custom|preview|final] [--indirect cache|gather|photon-map] [--gather MxN]``
-    ``[--gather-guided X] [--cache-error A] [--no-shadow-photons]``
+    ``[--gather-guided X] [--cache-error A] [--no-shadow-photons] [--dry-run]``
 
     Renders the active scene of ``SCENE.blend`` with Lanterna (whatever engine the file names),
     or the seed's Scene 1 (``--scene`` picks another) when no file is given. Flags override
@@ -21,6 +21,10 @@ Usage
     pipeline's report, the export statistics, warnings, settings, timings and peak memory.
     Progress and warnings go to stderr. With ``--sensitivity`` the PNG is made with the
     seed's tone curve instead (``engine/tonemap.py``, Fig. 11.1), as ``lanterna tonemap``.
+    ``--dry-run`` exports the scene, prints the plan and each stage's estimated time and
+    memory (``engine/estimate.py``) and exits 0 without rendering or writing anything (no
+    ``-o`` needed). A render whose estimated memory exceeds what is available is refused
+    before any work (status 2).
 
 ``lanterna tonemap IN.exr OUT.png [--sensitivity P2|auto] [--knee P1]``
     The seed's conversion of radiance to RGB (section 11.2, Fig. 11.1; section 12.2.1):
@@ -176,8 +180,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="the .blend to render (default: the seed's Scene 1)")
     render.add_argument("--scene", choices=SEED_SCENES, default=None,
                         help="render a seed scene built by code instead of a file")
-    render.add_argument("-o", "--output", required=True, metavar="OUT.exr",
-                        help="the OpenEXR file to write (R, G, B float32, linear)")
+    render.add_argument("-o", "--output", metavar="OUT.exr",
+                        help="the OpenEXR file to write (R, G, B float32, linear); required "
+                             "unless --dry-run")
     render.add_argument("--png", metavar="OUT.png", help="also write an sRGB 8-bit PNG")
     render.add_argument("--sensitivity", type=_radiance(True), metavar="P2",
                         help="make the PNG with the seed's tone curve (Fig. 11.1): saturation "
@@ -230,6 +235,9 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--threads", type=_int_at_least(0, 1024), metavar="N",
                         help="worker threads (0 = one per core)")
     render.add_argument("--quiet", action="store_true", help="no progress line")
+    render.add_argument("--dry-run", action="store_true",
+                        help="print the plan and each stage's estimated time and memory, "
+                             "render and write nothing (engine/estimate.py)")
 
     scene = sub.add_parser("scene", help="save a seed scene as a .blend",
                            description="Build one of the seed's scenes and save it.")
@@ -411,6 +419,10 @@ def cmd_render(args) -> int:
     # 1. Everything that can be checked without Blender, before any work.
     if args.blend and args.scene:
         raise UsageError("give either SCENE.blend or --scene, not both")
+    if args.dry_run:   # issue 6: the estimate only; no output is checked or written
+        return _dry_run(args)
+    if not args.output:
+        raise UsageError("the following arguments are required: -o/--output")
     outputs = {"exr": _check_output(args.output, ".exr", "-o")}
     if args.png:
         outputs["png"] = _check_output(args.png, ".png", "--png")
@@ -528,6 +540,51 @@ def cmd_render(args) -> int:
     return EXIT_OK
 
 
+def _dry_run(args) -> int:
+    """``render --dry-run``: export as a render would, print the plan and the estimate of each
+    stage (``engine/estimate.py``), render and write nothing."""
+    blend = _check_blend(args.blend) if args.blend else None
+    import bpy  # noqa: F401
+    from ..scene import SceneError
+    from .. import estimate
+    from . import export, seed_scenes
+
+    _ensure_registered()
+    scene = _open_blend(blend) if blend else seed_scenes.build(args.scene or "scene1")
+    _apply_overrides(scene, args)
+    resolution = export.render_resolution(scene.render)
+    if resolution[0] < 1 or resolution[1] < 1:
+        raise UsageError(f"the scene's resolution is {resolution[0]}x{resolution[1]} pixels")
+    border = export.render_border(scene.render, resolution)
+    try:
+        lscene = export.export_scene(bpy.context.evaluated_depsgraph_get(),
+                                     resolution=resolution, border=border)
+        settings = export.export_settings(scene).resolved()
+        settings.validate()
+        result = estimate.estimate_cost(lscene, settings, passes=args.passes,
+                                        measure_speed=True)
+    except SceneError as exc:
+        raise UsageError(str(exc)) from None
+    except estimate.RatesError as exc:
+        raise UsageError(str(exc)) from None
+    for text in list(lscene.warnings) + list(result.warnings):
+        print(f"{PROG}: warning: {' '.join(str(text).split())}", file=sys.stderr)
+    w, h = lscene.camera.window_size
+    source = blend or f"seed:{args.scene or 'scene1'}"
+    print(f"{PROG}: dry run of {source}: {w}x{h} px, {settings.samples} spp, preset "
+          f"{settings.preset}, {result.workers} workers; rates {result.rates_source}")
+    print("plan:")
+    for stage, reason in result.plan.items():
+        print(f"  {stage:<20}{reason}")
+    print(result.table())
+    try:
+        estimate.check_memory(result, result.available_bytes)
+    except SceneError as exc:
+        print(f"{PROG}: a render would be refused: {' '.join(str(exc).split())}")
+    print(f"{PROG}: nothing rendered, nothing written")
+    return EXIT_OK
+
+
 def _plain(obj):
     """``obj`` as plain JSON data: numpy values converted, NaN and infinities as None."""
     import math
@@ -594,9 +651,11 @@ def cmd_tonemap(args) -> int:
 
 def cmd_bench(argv: list[str]) -> int:
     bench_main = None
-    for module in ("lanterna.engine.blender.bench", "lanterna.engine.bench"):
+    import importlib
+
+    for module in (".bench", "..bench"):          # relative: also inside the Blender extension
         try:
-            bench_main = __import__(module, fromlist=["main"]).main
+            bench_main = importlib.import_module(module, __package__).main
             break
         except (ImportError, AttributeError):
             continue
@@ -641,5 +700,13 @@ def main(argv=None) -> int:
         return EXIT_INTERNAL
 
 
+def run() -> None:
+    """The ``lanterna`` command: ``main()``, then the exit (``compat.exit_process``: bpy 4.2 and
+    4.5 as a module cannot exit normally once Lanterna is registered)."""
+    from .compat import exit_process
+
+    exit_process(main())
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    run()

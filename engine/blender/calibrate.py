@@ -1,0 +1,594 @@
+"""This machine's rates for the cost estimate, and the estimate checked against real renders.
+
+What it computes (``lanterna bench --calibrate`` / ``lanterna bench --check-estimate``)
+    ``measure_rates()``: short runs on a calibration scene built in code (no bpy: a 5 x 4 x 3 m
+    room with a box and a geodesic sphere, 5,144 triangles, unlike the seed scenes the check
+    uses) and on a bumpy grid of 249,218 triangles:
+    1. raw embreex seconds per ray, closest hit, with the renderer's worker count: coherent
+       rays (pinhole rays through pixel centres) and incoherent rays (cosine directions from
+       surface points), on the calibration scene and on the grid (best of three each);
+       the grid also gives the BVH build and validate rates per triangle;
+    2. pipeline renders of the calibration scene, each stage's time divided by the counts
+       its report gives (``engine/estimate.py`` names the rates):
+       direct light only with 1 and with 4 point lights at 160x120, 16 spp (camera sample
+       and shadow ray rates, a 2 x 2 solve); an area light with 8 light samples and shadow
+       photons (light sample and shadow photon rates); final gathers at every pixel with
+       6x24 and 12x48 strata at 40x30 and 1x4 at 96x72 (gather ray and gather point rates,
+       non-negative least squares); irradiance-cache renders at 320x240 and 640x480, 1 spp,
+       300k photons, 4x12 strata, a = 0.3 (photon emission, tracing and map build; radiance
+       estimates; the placement passes' per-pixel cost after their gathers; cache look-ups);
+       and a photon-map look-up render.
+    Before each measurement the machine's speed is probed (``estimate.speed_probe``, as the
+    estimate probes it before a render); the mean goes into the rates file (``probe``) for the
+    estimate's speed factor.
+    Writes the rates (JSON) to ``--rates-file`` (default ``$XDG_CACHE_HOME/lanterna/
+    rates.json`` or ``~/.cache/lanterna/rates.json``) and prints them.
+
+    ``check_estimates()``: the seed's Scene 1 and Scene 2 (``seed_scenes.py``) at each of
+    ``--check-resolutions`` (default 160x120,640x480) with the ``preview`` and ``final``
+    presets: the estimate (from the rates just written, or the user's / shipped rates with
+    ``--check-estimate``), then the render, and prints predicted and measured pipeline time,
+    their ratio and PASS where it lies within [1/1.5, 1.5], with the estimate's speed factor,
+    the other processes' busy cores during the renders and the per-stage times. A
+    benchmark, not a test: the machine is shared, so this is a printout, never an assertion.
+
+    ``panel_estimate(context)``: the estimate the render panel shows (``ui/panels.py``,
+    ``LANTERNA_RENDER_PT_estimate``). The scene's facts (``estimate.scene_facts``) need an
+    export, too slow to repeat on every redraw of a big scene, so they are cached under a cheap
+    signature of the depsgraph (per evaluated object: name, type, polygon and vertex counts,
+    materials; per light: type, power, size, flags; the world; the camera); the estimate itself
+    is recomputed from the cached facts on every redraw (arithmetic), so changes of the
+    settings and the resolution show at once. A scene whose signature changed is exported again
+    when it has at most ``LIVE_EXPORT_TRIANGLES`` polygons; a bigger one keeps its older facts,
+    marked as such, or takes the facts of the last F12 render (its report's estimate), or,
+    with neither, says how to get an estimate (``lanterna render SCENE.blend --dry-run``).
+
+Every measurement and every checked render runs ``--repeat`` times (default 2) and the
+fastest run counts, as in ``bench.py``: on a shared machine it is the one least disturbed.
+
+Parameters
+    ``--rates-file PATH``, ``--threads N`` (0 = all cores), ``--check-resolutions LIST``
+    (comma-separated WxH; ``none`` skips the check), ``--repeat N`` (2), ``--json FILE``
+    (all figures).
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import sys
+import time
+
+import numpy as np
+
+from .. import estimate as est
+
+LIVE_EXPORT_TRIANGLES = 200_000
+PASS_FACTOR = 1.5
+REPEAT = 2                       # runs of each measurement and each check; the fastest counts
+
+
+# -- The calibration scene (core, no bpy) ------------------------------------------------------
+def _quad(c, du, dv):
+    c, du, dv = (np.asarray(v, float) for v in (c, du, dv))
+    p = [c - du - dv, c + du - dv, c + du + dv, c - du + dv]
+    return np.array([[p[0], p[1], p[2]], [p[0], p[2], p[3]]])
+
+
+def _box(lo, hi):
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    c, h = (lo + hi) / 2, (hi - lo) / 2
+    ex, ey, ez = np.diag(h)
+    return np.concatenate([_quad(c - ez, ex, ey), _quad(c + ez, ex, ey), _quad(c - ex, ey, ez),
+                           _quad(c + ex, ey, ez), _quad(c - ey, ex, ez), _quad(c + ey, ex, ez)])
+
+
+def _icosphere(radius, subdivisions, center):
+    t = (1.0 + 5 ** 0.5) / 2
+    v = np.array([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t],
+                  [0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]], float)
+    f = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9],
+                  [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2],
+                  [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10],
+                  [8, 6, 7], [9, 8, 1]])
+    tris = v[f] / np.linalg.norm(v[f], axis=2, keepdims=True)
+    for _ in range(subdivisions):
+        a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
+        ab, bc, ca = [(p + q) / np.linalg.norm(p + q, axis=1, keepdims=True)
+                      for p, q in ((a, b), (b, c), (c, a))]
+        tris = np.concatenate([np.stack(s, 1) for s in
+                               ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))])
+    return tris * radius + np.asarray(center, float)
+
+
+def calibration_scene(resolution=(160, 120), lights="point"):
+    """The calibration room: ``lights`` = ``point`` (one point light), ``points4`` (four) or
+    ``area`` (a 1 m square area light under the ceiling)."""
+    from ..scene import AreaLight, Camera, Material, PointLight, Scene
+
+    room = _box((0, 0, 0), (5, 4, 3))
+    box = _box((0.6, 2.2, 0.0), (1.6, 3.2, 1.2))
+    sphere = _icosphere(0.7, 4, (3.3, 2.3, 0.7))
+    tris = np.concatenate([room, box, sphere]).astype(np.float32)
+    ids = np.concatenate([np.zeros(2, np.int32), np.ones(10, np.int32),       # floor, walls
+                          np.full(len(box), 2, np.int32), np.full(len(sphere), 3, np.int32)])
+    materials = [Material("Floor", diffuse=(0.6, 0.5, 0.4)), Material("Walls", diffuse=0.75),
+                 Material("Box", diffuse=(0.5, 0.6, 0.7)), Material("Sphere", diffuse=(0.7, 0.2, 0.2))]
+    if lights == "area":
+        m = np.eye(4)
+        m[:3, 3] = (2.5, 2.0, 2.95)
+        light_list = [AreaLight("Panel", "SQUARE", m, 1.0, 1.0, power=np.full(3, 60.0))]
+    else:
+        spots = [(2.5, 1.0, 2.6), (4.2, 3.5, 2.4), (0.5, 0.5, 2.5), (1.0, 3.6, 1.8)]
+        light_list = [PointLight(f"Lamp{i}", p, np.full(3, 40.0))
+                      for i, p in enumerate(spots[:4 if lights == "points4" else 1])]
+    cam = Camera.look_at([0.4, 0.3, 1.7], [3.0, 2.6, 0.8], fov_x_deg=70, resolution=resolution)
+    return Scene(triangles=tris, material_ids=ids, materials=materials, camera=cam,
+                 lights=light_list)
+
+
+def _grid(n_triangles):
+    rng = np.random.default_rng(0)
+    side = int(np.sqrt(n_triangles / 2))
+    x, y = np.meshgrid(np.linspace(0, 10, side + 1), np.linspace(0, 10, side + 1))
+    p = np.stack([x, y, 0.05 * rng.random(x.shape)], -1).astype(np.float32)
+    a, b, c, d = p[:-1, :-1], p[1:, :-1], p[1:, 1:], p[:-1, 1:]
+    return np.ascontiguousarray(np.concatenate(
+        [np.stack([a, b, c], -2).reshape(-1, 3, 3), np.stack([a, c, d], -2).reshape(-1, 3, 3)]))
+
+
+# -- Measurements -----------------------------------------------------------------------------
+def _busy_seconds():
+    """CPU seconds all cores have been busy since boot (/proc/stat), None elsewhere."""
+    try:
+        with open("/proc/stat", encoding="ascii") as f:
+            ticks = [int(v) for v in f.readline().split()[1:9]]
+        hz = os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError, AttributeError):
+        return None
+    user, nice, system, _idle, _iowait, irq, softirq, steal = ticks
+    return (user + nice + system + irq + softirq + steal) / hz
+
+
+class LoadMeter:
+    """Busy cores of other processes since it was made: the machine's busy CPU time
+    (/proc/stat) minus this process's (``os.times``), over the wall time (printed beside the
+    check, to show how shared the machine was)."""
+
+    def __init__(self):
+        self.start = (time.perf_counter(), _busy_seconds(), self._own())
+
+    @staticmethod
+    def _own() -> float:
+        t = os.times()
+        return t.user + t.system
+
+    def cores(self):
+        t0, busy0, own0 = self.start
+        busy1, wall = _busy_seconds(), time.perf_counter() - t0
+        if busy0 is None or busy1 is None or wall <= 0:
+            return None
+        return max(0.0, ((busy1 - busy0) - (self._own() - own0)) / wall)
+
+
+def _raw_seconds_per_ray(triangles, origins, directions, workers, repeat=3):
+    from .bench import raw_embree_seconds
+
+    step = 1 << 16
+    log = [("camera", origins[a:a + step], directions[a:a + step], None)
+           for a in range(0, len(origins), step)]
+    best = min(raw_embree_seconds(triangles, log, workers) for _ in range(repeat))
+    return best / len(origins)
+
+
+def _raw_rays(workers, tell):
+    """Raw embreex seconds per ray (coherent, incoherent) on the calibration scene and the
+    250k grid; BVH build and validate rates from the grid."""
+    from .. import sampling
+    from ..accel import Accelerator
+    from ..camera import pixel_rays
+    from ..scene import Camera, Material, Scene
+
+    out = {}
+    rng = np.random.default_rng(1)
+    for size, scene in (("small", calibration_scene((320, 240))), ("large", None)):
+        if scene is None:
+            tris = _grid(250_000)
+            cam = Camera.look_at([5, 5, 6], [5, 5, 0], up=(0, 1, 0), fov_x_deg=60,
+                                 resolution=(320, 240))
+            scene = Scene(triangles=tris, material_ids=np.zeros(len(tris), np.int32),
+                          materials=[Material("Grid")], camera=cam)
+            t0 = time.perf_counter()
+            scene.validate()
+            out["validate_triangle"] = (time.perf_counter() - t0) / len(tris)
+            accel = Accelerator(scene.triangles, threads=1)
+            out["bvh_triangle"] = accel.build_seconds / len(tris)
+        else:
+            accel = Accelerator(scene.triangles, threads=1)
+        tell(f"raw embreex rays on {len(scene.triangles):,} triangles")
+        o, d, _t = pixel_rays(scene.camera, 0, 320 * 240, 4, rng)
+        t, prim, _u, _v = accel.intersect(o, d)
+        hit = prim >= 0
+        x = (o[hit] + t[hit, None] * d[hit]).astype(np.float64)
+        n = scene.geometric_normals()[prim[hit]].astype(np.float64)
+        n[np.einsum("ij,ij->i", n, d[hit]) > 0] *= -1
+        dirs = sampling.cosine_directions(n, rng.random((len(n), 2)))
+        org = accel.offset_origins(x, n, dirs).astype(np.float32)
+        accel.close()
+        out[f"triangles_{size}"] = float(len(scene.triangles))
+        out[f"coherent_{size}"] = _raw_seconds_per_ray(scene.triangles, o, d, workers)
+        out[f"incoherent_{size}"] = _raw_seconds_per_ray(scene.triangles, org,
+                                                         dirs.astype(np.float32), workers)
+    return out
+
+
+def _fastest(reports) -> dict:
+    """The stages of ``reports`` (same scene, settings and seed: same counts) with every
+    ``*seconds`` entry the smallest of the runs: on a shared machine the fastest run is the
+    one least disturbed by other work (as ``bench.py`` does)."""
+    stages = {k: dict(v) for k, v in reports[0]["stages"].items()}
+    for report in reports[1:]:
+        for name, entry in report["stages"].items():
+            for key, value in entry.items():
+                if key.endswith("seconds") and isinstance(value, (int, float)):
+                    stages[name][key] = min(stages[name][key], value)
+    return stages
+
+
+def _render(scene, tell, label, repeat=REPEAT, probes=None, **settings):
+    from ..pipeline import RenderSettings, render
+
+    tell(label)
+    s = RenderSettings(**{"seed": 1, **settings})
+    if probes is not None:              # the machine's speed at this moment (estimate.py)
+        probes.append(est.speed_probe(s.worker_count))
+    return _fastest([render(scene, s).report for _ in range(max(1, repeat))]), s
+
+
+def _nonnegative_fit(rows, values, floor=0.0):
+    """Per-unit costs >= ``floor`` from equations rows[i] . costs = values[i] (least squares
+    with non-negative costs, scipy's NNLS; rows scaled so each equation weighs alike)."""
+    from scipy.optimize import nnls
+
+    m, y = np.asarray(rows, float), np.asarray(values, float)
+    scale = np.maximum(np.abs(y), 1e-9)
+    costs, _ = nnls(m / scale[:, None], y / scale)
+    return tuple(float(max(c, floor)) for c in costs)
+
+
+def measure_rates(threads=0, tell=print, repeat=REPEAT) -> est.Rates:
+    """Measure every rate of ``estimate.RATE_KEYS`` on this machine (module docstring), each
+    render ``repeat`` times, the fastest counting."""
+    from functools import partial
+
+    from ..pipeline import RenderSettings
+
+    workers = RenderSettings(threads=threads).worker_count
+    probes = [est.speed_probe(workers)]
+    run = partial(_render, repeat=repeat, probes=probes)
+
+    r = {}
+    raw = _raw_rays(workers, tell)
+    r["validate_triangle"] = raw.pop("validate_triangle")
+    r["bvh_triangle"] = raw.pop("bvh_triangle")
+    tiny = 1e-9
+
+    # camera samples and delta shadow rays: 1 and 4 point lights, direct light only
+    direct = dict(bounces=0, samples=16, threads=threads)
+    rows, ys = [], []
+    for lights in ("point", "points4"):
+        stages, _ = run(calibration_scene((160, 120), lights), tell,
+                        f"direct light, {lights}", **direct)
+        cam = stages["camera"]
+        rows.append((cam["camera_rays"], cam["shadow_rays"]))
+        ys.append(cam["seconds"])
+    r["camera_sample"], r["shadow_ray"] = _nonnegative_fit(rows, ys, tiny)
+
+    # light samples of an area light, shadow photons
+    stages, s = run(calibration_scene((160, 120), "area"), tell,
+                    "area light, 8 light samples, shadow photons",
+                    bounces=0, samples=16, light_samples=8, threads=threads)
+    cam = stages["camera"]
+    samples = cam["camera_rays"] * s.light_samples
+    r["light_sample"] = max(tiny, (cam["seconds"] - cam["camera_rays"] * r["camera_sample"])
+                            / samples)
+    sp = stages.get("shadow_photons", {})
+    r["shadow_photon"] = sp.get("seconds", 0.0) / max(sp.get("emitted", sp.get("requested", 1)), 1)
+
+    def direct_part(cam):
+        return cam["camera_rays"] * r["camera_sample"] + cam["shadow_rays"] * r["shadow_ray"]
+
+    # final gather at every look-up: three gather sizes (many rays a point, and few)
+    rows, ys = [], []
+    for (m, n), res in (((6, 24), (40, 30)), ((12, 48), (40, 30)), ((1, 4), (96, 72))):
+        stages, _ = run(calibration_scene(res), tell, f"final gather {m}x{n}, {res[0]}x{res[1]}",
+                        samples=1, photons=100_000, indirect="gather", gather_m=m,
+                        gather_n=n, threads=threads)
+        cam = stages["camera"]
+        rows.append((cam["gather_rays"], cam["gather_points"]))
+        ys.append(cam["seconds"] - direct_part(cam))
+    r["gather_ray"], r["gather_point"] = _nonnegative_fit(rows, ys, tiny)
+
+    # photons, estimates, cache passes, cache look-ups: two cache renders
+    sums = dict.fromkeys(("emit", "emitted", "trace", "rays", "store", "stored", "est",
+                          "estimates", "cache", "pixels", "lookup", "interpolated"), 0.0)
+    for res, (m, n), a in (((320, 240), (4, 12), 0.3), ((640, 480), (4, 12), 0.3)):
+        stages, s = run(calibration_scene(res), tell, f"irradiance cache {res[0]}x{res[1]}",
+                        samples=1, photons=300_000, gather_m=m, gather_n=n, cache_error=a,
+                        threads=threads)
+        ph, cam, ic = stages["photons"], stages["camera"], stages["irradiance_cache"]
+        sums["emit"] += ph["emit_seconds"]
+        sums["emitted"] += ph["emitted"]
+        sums["trace"] += ph["trace_seconds"]
+        sums["rays"] += ph["photon_rays"]
+        sums["store"] += max(ph["seconds"] - ph["emit_seconds"] - ph["trace_seconds"], 0.0)
+        sums["stored"] += ph["stored_all"]
+        sums["est"] += stages["radiance_estimates"]["seconds"]
+        sums["estimates"] += stages["radiance_estimates"]["estimates"]
+        gather = m * n * (1 + s.gather_guided)
+        per_point = gather * r["gather_ray"] + r["gather_point"]
+        sums["cache"] += max(ic["seconds"] - ic["records"] * per_point, 0.0)
+        sums["pixels"] += res[0] * res[1]
+        sums["lookup"] += max(cam["seconds"] - direct_part(cam) - cam["gather_rays"]
+                              * r["gather_ray"] - cam["gather_points"] * r["gather_point"], 0.0)
+        sums["interpolated"] += cam["cache_interpolated"]
+    r["photon_emit"] = max(tiny, sums["emit"] / sums["emitted"])
+    r["photon_ray"] = max(tiny, sums["trace"] / sums["rays"])
+    r["photon_store"] = max(tiny, sums["store"] / sums["stored"])
+    r["radiance_estimate"] = max(tiny, sums["est"] / sums["estimates"])
+    r["cache_pixel"] = max(tiny, sums["cache"] / sums["pixels"])
+    r["cache_lookup"] = max(tiny, sums["lookup"] / max(sums["interpolated"], 1))
+
+    # photon-map look-ups at the hits
+    stages, _ = run(calibration_scene((160, 120)), tell, "photon-map look-ups",
+                    samples=4, photons=300_000, indirect="photon-map", threads=threads)
+    cam = stages["camera"]
+    r["photon_lookup"] = max(tiny, (cam["seconds"] - direct_part(cam))
+                             / max(cam["photon_queries"], 1))
+    return est.Rates(seconds={k: float(r[k]) for k in est.RATE_KEYS}, workers=workers,
+                     cores=os.cpu_count() or 1, raw={k: raw[k] for k in est.RAW_KEYS},
+                     measured=datetime.datetime.now().isoformat(timespec="seconds"),
+                     probe=round(float(np.mean(probes)), 6))
+
+
+def print_rates(rates: est.Rates, path=None) -> None:
+    where = f" -> {path}" if path else ""
+    probe = "" if rates.probe is None else f", speed probe {rates.probe * 1e3:.0f} ms"
+    print(f"Rates of this machine ({rates.workers} workers, {rates.cores} cores, "
+          f"{rates.measured}{probe}){where}")
+    for key, what in est.RATE_KEYS.items():
+        print(f"  {key:<18} {rates.seconds[key] * 1e6:10.3f} us   {what}")
+    raw = rates.raw
+    if raw:
+        for size in ("small", "large"):
+            print(f"  raw embreex, {int(raw[f'triangles_{size}']):>9,} triangles: coherent "
+                  f"{1e-6 / raw[f'coherent_{size}']:6.2f} Mrays/s, incoherent "
+                  f"{1e-6 / raw[f'incoherent_{size}']:6.2f} Mrays/s")
+
+
+
+# -- The check: estimate against measured time -----------------------------------------------
+def check_estimates(resolutions=((160, 120), (640, 480)), scenes=("scene1", "scene2"),
+                    presets=("preview", "final"), rates=None, threads=0, tell=print,
+                    repeat=REPEAT) -> list:
+    """Estimate, then render ``repeat`` times, every (scene, resolution, preset); rows of
+    predicted and measured seconds (the fastest run; per stage the fastest) in total and per
+    stage."""
+    import bpy
+
+    from . import seed_scenes
+    from .export import export_scene
+    from ..pipeline import RenderSettings, render
+
+    rows = []
+    for name in scenes:
+        for w, h in resolutions:
+            seed_scenes.build(name)
+            b = bpy.context.scene
+            b.render.resolution_x, b.render.resolution_y = w, h
+            b.render.resolution_percentage = 100
+            scene = export_scene(bpy.context.evaluated_depsgraph_get())
+            for preset in presets:
+                settings = RenderSettings(preset=preset, threads=threads)
+                e = est.estimate_cost(scene, settings, rates, measure_speed=True)
+                tell(f"{name} {w}x{h} {preset}: predicted {e.seconds:.1f} s (speed factor "
+                     f"{e.speed['factor']:.2f}), rendering")
+                meter = LoadMeter()
+                reports = [render(scene, settings).report for _ in range(max(1, repeat))]
+                during = meter.cores()
+                measured = min(r["total_seconds"] for r in reports)
+                fastest = _fastest(reports)
+                stages = {k: (v.seconds, fastest.get(k, {}).get("seconds"))
+                          for k, v in e.stages.items()}
+                rows.append({"scene": name, "resolution": [w, h], "preset": preset,
+                             "predicted_seconds": e.seconds, "measured_seconds": measured,
+                             "measured_runs": [r["total_seconds"] for r in reports],
+                             "speed_factor": e.speed.get("factor"), "load_during": during,
+                             "ratio": e.seconds / measured if measured > 0 else float("inf"),
+                             "predicted_peak_bytes": e.peak_bytes, "stages": stages,
+                             "estimate": e.to_report()})
+    return rows
+
+
+def print_check(rows) -> bool:
+    print(f"Estimate against measured pipeline time (PASS: ratio within "
+          f"[1/{PASS_FACTOR:g}, {PASS_FACTOR:g}]); speed: the estimate's speed factor; "
+          "load: other processes' busy cores during the renders")
+    print(f"  {'scene':<8}{'size':>9}  {'preset':<8}{'predicted':>11}{'measured':>10}"
+          f"{'ratio':>7}  result  speed  load   per stage (predicted/measured s)")
+    ok = True
+    for row in rows:
+        good = 1 / PASS_FACTOR <= row["ratio"] <= PASS_FACTOR
+        ok &= good
+        parts = ", ".join(f"{k} {p:.2f}/{m:.2f}" for k, (p, m) in row["stages"].items()
+                          if m is not None and max(p, m) >= 0.05)
+        w, h = row["resolution"]
+        print(f"  {row['scene']:<8}{f'{w}x{h}':>9}  {row['preset']:<8}"
+              f"{row['predicted_seconds']:>9.2f} s{row['measured_seconds']:>8.2f} s"
+              f"{row['ratio']:>7.2f}  {'PASS' if good else 'FAIL':<6}  {_load(row)}   {parts}")
+    return ok
+
+
+def _load(row) -> str:
+    speed, during = row.get("speed_factor"), row.get("load_during")
+    return (f"{'?' if speed is None else f'{speed:.2f}':>5}  "
+            f"{'?' if during is None else f'{during:.1f}':>4}")
+
+
+def _resolutions(text: str):
+    if text.strip().lower() in ("none", ""):
+        return ()
+    out = []
+    for part in text.split(","):
+        w, h = (int(v) for v in part.lower().split("x"))
+        if w < 1 or h < 1:
+            raise ValueError(part)
+        out.append((w, h))
+    return tuple(out)
+
+
+def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = argparse.ArgumentParser(
+        prog="lanterna bench --calibrate",
+        description="Measure this machine's rates for the cost estimate and check the "
+                    "estimate against real renders of the seed scenes.")
+    parser.add_argument("--calibrate", action="store_true",
+                        help="measure the rates and write them (then check)")
+    parser.add_argument("--check-estimate", action="store_true",
+                        help="only check the estimate against measured renders")
+    parser.add_argument("--rates-file", default=None,
+                        help=f"where to write the rates (default {est.user_rates_path()})")
+    parser.add_argument("--check-resolutions", default="160x120,640x480",
+                        help="comma-separated WxH for the check, or 'none'")
+    parser.add_argument("--threads", type=int, default=0)
+    parser.add_argument("--repeat", type=int, default=REPEAT,
+                        help=f"runs of every measurement and check; the fastest counts "
+                             f"(default {REPEAT})")
+    parser.add_argument("--json", default=None)
+    args = parser.parse_args(argv)
+    try:
+        resolutions = _resolutions(args.check_resolutions)
+    except ValueError:
+        print("lanterna: error: --check-resolutions must look like 160x120,640x480 or none",
+              file=sys.stderr)
+        return 2
+    out = {}
+
+    def tell(text):
+        print(f"  ... {text}", flush=True)
+
+    if args.calibrate:
+        t0 = time.perf_counter()
+        rates = measure_rates(args.threads, tell, max(1, args.repeat))
+        path = est.save_rates(rates, args.rates_file)
+        rates.source = str(path)
+        print_rates(rates, path)
+        print(f"calibration took {time.perf_counter() - t0:.1f} s")
+        out["rates"] = rates.to_json()
+    else:
+        user = args.rates_file or est.user_rates_path()
+        rates = est.load_rates(user_path=user)
+        for text in rates.warnings:
+            print(f"lanterna: warning: {text}", file=sys.stderr)
+        print(f"Rates from {rates.source} ({rates.measured})")
+    ok = True
+    if resolutions:
+        rows = check_estimates(resolutions, rates=rates, threads=args.threads, tell=tell,
+                               repeat=max(1, args.repeat))
+        ok = print_check(rows)
+        out["check"] = rows
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump(out, fh, indent=2, default=str)
+    if not ok:
+        print("(a benchmark on a shared machine: a FAIL is a finding to look into, not an error)")
+    return 0
+
+
+# -- The render panel's estimate (ui/panels.py) -----------------------------------------------
+_PANEL_CACHE: dict = {}
+
+
+def _signature(depsgraph, bscene) -> tuple:
+    """A cheap key of what the facts depend on (module docstring)."""
+    items = []
+    polygons = 0
+    for obj in depsgraph.objects:
+        row = [obj.name, obj.type]
+        data = getattr(obj, "data", None)
+        if obj.type == 'MESH' and data is not None:
+            polygons += len(data.polygons)
+            row += [len(data.polygons), len(data.vertices),
+                    tuple(m.name if m else "" for m in data.materials)]
+        elif obj.type == 'LIGHT' and data is not None:
+            row += [data.type, round(float(data.energy), 6), tuple(data.color),
+                    round(float(getattr(data, "size", 0.0)), 6),
+                    round(float(getattr(data, "size_y", 0.0)), 6),
+                    round(float(getattr(data, "angle", 0.0)), 6),
+                    round(float(getattr(data, "spread", 0.0)), 6),
+                    bool(getattr(getattr(data, "lanterna", None), "shadow_photons", True))]
+        items.append(tuple(row))
+    world = bscene.world
+    wkey = world.name_full if world is not None else ""
+    camera = bscene.camera
+    cam = ((camera.name, round(float(getattr(camera.data, "lens", 0.0)), 6),
+            round(float(getattr(camera.data, "sensor_width", 0.0)), 6))
+           if camera is not None else "")
+    return tuple(sorted(items)), polygons, wkey, cam, bscene.name
+
+
+def _last_render_facts():
+    """The facts of the last F12 render (its report's estimate), or None."""
+    from .render_engine import LAST_RENDER
+
+    facts = (((LAST_RENDER or {}).get("report") or {}).get("estimate") or {}).get("facts")
+    try:
+        return est.SceneFacts.from_dict(facts) if facts else None
+    except (KeyError, TypeError, ValueError):
+        return None
+
+
+def panel_estimate(context):
+    """(estimate or None, note) for the render panel; never raises."""
+    try:
+        import bpy
+
+        from .export import export_scene, export_settings, render_border, render_resolution
+
+        bscene = context.scene
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        key = _signature(depsgraph, bscene)
+        cached = _PANEL_CACHE.get(bscene.name)
+        note = ""
+        if cached is None or cached[0] != key:
+            if key[1] <= LIVE_EXPORT_TRIANGLES:
+                scene = export_scene(depsgraph)
+                facts = est.scene_facts(scene)
+                _PANEL_CACHE[bscene.name] = (key, facts)
+            elif cached is not None:
+                facts = cached[1]
+                note = (f"The scene changed since its facts were taken (over "
+                        f"{LIVE_EXPORT_TRIANGLES:,} polygons: not exported while drawing)")
+            else:
+                facts = _last_render_facts()
+                if facts is None:
+                    return None, (f"The scene has over {LIVE_EXPORT_TRIANGLES:,} polygons: "
+                                  "render once, or 'lanterna render SCENE.blend --dry-run'")
+                note = "Scene facts from the last render"
+        else:
+            facts = cached[1]
+        resolution = render_resolution(bscene.render)
+        border = render_border(bscene.render, resolution) or (0, 0, *resolution)
+        facts = est.SceneFacts(**{**facts.__dict__, "frame": tuple(resolution),
+                                  "border": tuple(border),
+                                  "window": (border[2] - border[0], border[3] - border[1])})
+        settings = export_settings(bscene)
+        return est.estimate_from_facts(facts, settings, available=est.available_memory()), note
+    except Exception as exc:   # a panel must draw whatever happens
+        return None, f"No estimate: {type(exc).__name__}: {exc}"
+
+
+if __name__ == "__main__":
+    sys.exit(main())

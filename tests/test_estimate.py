@@ -1,0 +1,347 @@
+"""The cost estimate (engine/estimate.py): counts, plan, memory refusal, dry run, rates files.
+
+What is checked (no timings are asserted: the machine is shared; ``lanterna bench
+--check-estimate`` prints predicted against measured time)
+* Counts the estimate predicts before any tracing equal what a render reports where they are
+  deterministic: camera rays, shadow rays of a point light over a plane that faces it, photons
+  emitted, look-ups (cache, photon map), radiance estimates given the stored photons, shadow
+  photons; the plan equals the pipeline's for scenes that skip and run different stages.
+* Predicted counts lie within stated bounds: stored photons in a closed room within 5 % (the
+  bounce factor 1 / (1 - rho) is exact in expectation there), also with a bounce cap and
+  with first hits dropped; irradiance-cache records within a factor 2 (a fit).
+* Memory: with ``available_memory`` patched to 1 MiB, ``render`` and ``bake`` raise
+  SceneError naming the GiB needed, the biggest stages and what is available, before any
+  work (a spy on the BVH build is never called).
+* ``lanterna render --dry-run`` prints the plan and the table, writes nothing, exits 0.
+* Rates files: round trip; the user file wins; a partial one is completed from the
+  defaults with a warning; a corrupt one gives a warning naming it and the defaults are
+  used (also in a render's report); the shipped file is complete and packaged.
+"""
+import json
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from analytic import box_room, plane_scene, quad
+from lanterna.engine import estimate, pipeline
+from lanterna.engine.blender.calibrate import calibration_scene
+from lanterna.engine.pipeline import RenderSettings, bake, render
+from lanterna.engine.scene import AreaLight, Camera, Material, PointLight, Scene, SceneError
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(autouse=True)
+def _own_rates(tmp_path, monkeypatch):
+    """No user rates file of this machine leaks in: the cache directory is a fresh one."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    estimate._RATES_CACHE.clear()
+    yield
+    estimate._RATES_CACHE.clear()
+
+
+def _room(rho=0.5, resolution=(24, 18), lights=None):
+    tris = box_room(size=(4.0, 4.0, 3.0))
+    return Scene(triangles=tris, material_ids=np.zeros(len(tris), np.int32),
+                 materials=[Material("grey", diffuse=rho)],
+                 camera=Camera.look_at([1.0, 1.0, 1.5], [3.0, 3.0, 1.0], resolution=resolution),
+                 lights=lights or [PointLight("Lamp", (2.0, 2.0, 2.5), 60.0)])
+
+
+# -- Counts -----------------------------------------------------------------------------------
+def test_deterministic_counts_equal_the_render_report():
+    """Camera rays, point-light shadow rays, photons, cache look-ups and radiance estimates."""
+    scene = plane_scene([PointLight("Lamp", (0.0, 0.0, 3.0), 100.0)], rho=0.6,
+                        resolution=(32, 24))
+    settings = RenderSettings(samples=3, photons=20_000, photon_lookups=2, gather_m=4,
+                              gather_n=8, seed=2)
+    e = estimate.estimate_cost(scene, settings)
+    report = render(scene, settings).report
+    st, cam = report["stages"], report["stages"]["camera"]
+    pixels = 32 * 24
+    assert e.stages["camera"].counts["camera_rays"] == cam["camera_rays"] == pixels * 3
+    # Every hit faces the lamp, so each gets exactly one shadow ray.
+    assert e.stages["camera"].counts["shadow_rays"] == cam["shadow_rays"] == pixels * 3
+    assert e.stages["photons"].counts["emitted"] == st["photons"]["emitted"] == 20_000
+    assert e.stages["camera"].counts["lookups"] == \
+        cam["cache_interpolated"] + cam["cache_gathered"] == pixels * 2
+    assert estimate.radiance_estimate_count(st["photons"]["stored"]) == \
+        st["radiance_estimates"]["estimates"]
+    # The same stages, and the estimate is in the report.
+    assert set(e.stages) == set(st)
+    assert report["estimate"]["stages"]["camera"]["counts"]["camera_rays"] == pixels * 3
+    assert report["estimate"]["seconds"] > 0 and report["estimate"]["peak_bytes"] > 0
+
+
+def test_a_window_of_a_large_frame_counts_as_its_part_of_the_frame():
+    """Automatic counts follow the full frame and the camera shades whole full-frame blocks:
+    a 32 x 24 window of a 640 x 480 frame at 3 spp lies in one 144 x 144 block, whose pixels
+    each look up one sample (300k look-ups over 307k pixels, as the whole frame would)."""
+    scene = plane_scene([PointLight("Lamp", (0.0, 0.0, 3.0), 100.0)], rho=0.6,
+                        resolution=(640, 480))
+    scene.camera = Camera.look_at([0, 0, 4], [0, 0, 0], up=(0, 1, 0), fov_x_deg=90,
+                                  resolution=(640, 480), border=(304, 228, 336, 252))
+    settings = RenderSettings(samples=3, photons=20_000, gather_m=2, gather_n=4)
+    e = estimate.estimate_cost(scene, settings)
+    cam = render(scene, settings).report["stages"]["camera"]
+    assert estimate.camera_blocks((640, 480), (304, 228, 336, 252), 3) == (144 ** 2, 1, 144 ** 2)
+    assert e.stages["camera"].counts["camera_rays"] == cam["camera_rays"] == 144 ** 2 * 3
+    assert e.stages["camera"].counts["lookups"] == \
+        cam["cache_interpolated"] + cam["cache_gathered"] == 144 ** 2
+
+
+@pytest.mark.parametrize("indirect", ["photon-map", "gather"])
+def test_photon_map_and_gather_lookups_are_exact(indirect):
+    scene = _room(resolution=(16, 12))
+    settings = RenderSettings(samples=4, photons=10_000, indirect=indirect, gather_m=2,
+                              gather_n=4, gather_guided=0.0)
+    e = estimate.estimate_cost(scene, settings)
+    cam = render(scene, settings).report["stages"]["camera"]
+    lookups = 16 * 12 * 4                      # auto: every sample of a small image
+    if indirect == "photon-map":
+        assert e.stages["camera"].counts["photon_lookups"] == cam["photon_queries"] == lookups
+    else:
+        assert e.stages["camera"].counts["gathered"] == cam["gather_points"] == lookups
+        # Unguided and no mirrors: exactly M x N rays a point.
+        assert cam["gather_rays"] == lookups * 2 * 4
+
+
+def test_shadow_photon_count_and_plans_equal_the_pipeline():
+    cases = [
+        (calibration_scene((16, 12), "area"), RenderSettings(samples=1, photons=5_000,
+                                                             bounces=0)),
+        (_room(), RenderSettings(samples=1, photons=5_000, mode="photon-map")),
+        (_room(), RenderSettings(samples=1, bounces=0)),
+        (_room(), RenderSettings(samples=1, photons=5_000, indirect="photon-map",
+                                 force="shadow_photons")),
+    ]
+    for scene, settings in cases:
+        e = estimate.estimate_cost(scene, settings)
+        report = render(scene, settings).report
+        assert e.plan == report["plan"]["stages"], settings
+        assert set(e.stages) == set(report["stages"]), settings
+        if "shadow_photons" in report["stages"]:
+            assert e.stages["shadow_photons"].counts["shadow_photons"] == \
+                report["stages"]["shadow_photons"]["requested"]
+
+
+def test_stored_photons_within_5_percent_in_a_closed_room():
+    """Closed room of one albedo: expected hits per photon sum_{i<=B} rho^i exactly."""
+    cases = [(0.5, 64, "cache", 2.0), (0.5, 1, "cache", 1.5), (0.7, 64, "photon-map", 1 / 0.3 - 1)]
+    for rho, bounces, indirect, hits in cases:
+        scene = _room(rho)
+        settings = RenderSettings(samples=1, photons=40_000, bounces=bounces,
+                                  indirect=indirect, gather_m=2, gather_n=4, seed=3)
+        e = estimate.estimate_cost(scene, settings)
+        predicted = e.stages["photons"].counts["stored"]
+        assert predicted == pytest.approx(40_000 * hits, rel=1e-6)   # float32 albedo
+        measured = render(scene, settings).report["stages"]["photons"]["stored"]
+        assert measured == pytest.approx(predicted, rel=0.05), (rho, bounces, indirect)
+
+
+def test_open_scene_photons_are_not_counted_as_closed():
+    """A lone plane: most photons never hit it and bounced ones escape. The closure c (share
+    of the bounds' faces covered: the floor of a 10 x 10 x 4 box) as the chance of a hit
+    keeps the prediction within a factor 2 (as a closed scene it would be 65 x too many)."""
+    scene = plane_scene([PointLight("Lamp", (0.0, 0.0, 3.0), 100.0)], rho=1.0)
+    facts = estimate.scene_facts(scene)
+    assert facts.closure == pytest.approx(100 / (2 * 100 + 4 * 40), rel=1e-6)
+    settings = RenderSettings(samples=1, photons=20_000, indirect="photon-map", mode="photon-map")
+    predicted = estimate.estimate_cost(scene, settings).stages["photons"].counts["stored"]
+    measured = render(scene, settings).report["stages"]["photons"]["stored"]
+    assert 0.5 < predicted / measured < 2.0, (predicted, measured)
+
+
+def test_cache_records_within_a_factor_2():
+    scene = calibration_scene((128, 96))
+    settings = RenderSettings(samples=1, photons=30_000, cache_error=0.25, gather_m=4,
+                              gather_n=12)
+    predicted = estimate.estimate_cost(scene, settings).stages["irradiance_cache"].counts["records"]
+    measured = render(scene, settings).report["stages"]["irradiance_cache"]["records"]
+    assert 0.5 < predicted / measured < 2.0, (predicted, measured)
+
+
+# -- Memory -----------------------------------------------------------------------------------
+def test_too_little_memory_is_refused_before_any_work(monkeypatch):
+    built = []
+
+    def spy(*args, **kwargs):
+        built.append(args)
+        raise AssertionError("the BVH was built")
+
+    monkeypatch.setattr(estimate, "available_memory", lambda: 1 << 20)
+    monkeypatch.setattr(pipeline, "Accelerator", spy)
+    scene = _room()
+    settings = RenderSettings(samples=2, photons=2_000_000)
+    for run in (render, bake):
+        with pytest.raises(SceneError) as info:
+            run(scene, settings)
+        message = str(info.value)
+        assert "needs about" in message and "GiB" in message and "photons" in message
+        assert "only 0.0 GiB is available" in message and "lower" in message
+    assert built == []
+    # The estimate in the message is the estimate's own peak.
+    e = estimate.estimate_cost(scene, settings)
+    assert f"{e.peak_bytes / estimate.GIB:.1f} GiB" in message
+
+
+def test_memory_of_a_big_setting_and_the_peak():
+    scene = _room(resolution=(640, 480))
+    e = estimate.estimate_cost(scene, RenderSettings(photons=10_000_000, samples=4))
+    photons = e.stages["photons"]
+    # 10M photons in a closed room of rho 0.5: 20M stored at 56 B kept + 72 B while building.
+    assert photons.keeps == pytest.approx(20e6 * estimate.PHOTON_BYTES, rel=1e-6)
+    assert e.peak_bytes == max(s.peak for s in e.stages.values())
+    assert e.peak_bytes >= photons.keeps + 20e6 * estimate.PHOTON_BUILD_BYTES
+    with pytest.raises(SceneError, match="needs about 2.4 GiB"):
+        estimate.check_memory(e, available=1 << 30)
+    estimate.check_memory(e, available=1 << 40)               # fits: no error
+
+
+def test_available_memory_is_known_here():
+    available = estimate.available_memory()
+    assert available is not None and available > 1 << 26
+
+
+def test_unusable_scene_arrays_are_left_to_the_validate_stage():
+    scene = _room()
+    scene.material_ids = np.full(len(scene.triangles), 7, np.int32)   # no such material
+    with pytest.raises(SceneError, match="material that does not exist"):
+        render(scene, RenderSettings(samples=1))
+
+
+# -- Rates files ------------------------------------------------------------------------------
+def _rates(value=1e-6):
+    raw = {k: 1e-6 * (i + 1) for i, k in enumerate(estimate.RAW_KEYS)}
+    raw.update(triangles_small=1e3, triangles_large=1e6)
+    return estimate.Rates(seconds={k: value for k in estimate.RATE_KEYS}, workers=2, cores=2,
+                          raw=raw, measured="test")
+
+
+def test_rates_round_trip_and_the_user_file_wins(tmp_path):
+    path = estimate.save_rates(_rates(2.5e-6), tmp_path / "cache" / "lanterna" / "rates.json")
+    assert path == estimate.user_rates_path()
+    back = estimate.read_rates(path)
+    assert back.seconds == _rates(2.5e-6).seconds and back.raw == _rates().raw
+    assert (back.workers, back.cores, back.measured) == (2, 2, "test")
+    loaded = estimate.load_rates()
+    assert loaded.source == str(path) and loaded.warnings == []
+    assert loaded.seconds["camera_sample"] == 2.5e-6
+    assert [p.name for p in path.parent.iterdir()] == ["rates.json"]     # no temporary left
+
+
+def test_partial_user_file_is_completed_from_the_defaults(tmp_path):
+    data = _rates(3e-6).to_json()
+    del data["seconds"]["gather_ray"]
+    path = estimate.user_rates_path()
+    path.parent.mkdir(parents=True)
+    path.write_text(json.dumps(data))
+    rates = estimate.load_rates()
+    defaults = estimate.read_rates(estimate.DEFAULT_RATES_PATH)
+    assert rates.seconds["gather_ray"] == defaults.seconds["gather_ray"]
+    assert rates.seconds["camera_sample"] == 3e-6
+    assert len(rates.warnings) == 1 and "gather_ray" in rates.warnings[0]
+
+
+@pytest.mark.parametrize("text, reason", [
+    ("{not json", "is not valid JSON"),
+    (json.dumps({"schema": 1, "seconds": {"camera_sample": -1}, "workers": 2}), "'camera_sample'"),
+    (json.dumps({"schema": 99, "seconds": {}}), "schema 99"),
+    (json.dumps([1, 2]), "not a JSON object"),
+])
+def test_corrupt_user_rates_warn_and_fall_back_to_the_defaults(text, reason):
+    path = estimate.user_rates_path()
+    path.parent.mkdir(parents=True)
+    path.write_text(text)
+    rates = estimate.load_rates()
+    defaults = estimate.read_rates(estimate.DEFAULT_RATES_PATH)
+    assert rates.source == str(estimate.DEFAULT_RATES_PATH)
+    assert rates.seconds == defaults.seconds
+    assert len(rates.warnings) == 1
+    assert str(path) in rates.warnings[0] and reason in rates.warnings[0]
+    assert "shipped with Lanterna" in rates.warnings[0]
+
+
+def test_a_render_reports_the_rates_warning():
+    path = estimate.user_rates_path()
+    path.parent.mkdir(parents=True)
+    path.write_text("garbage")
+    report = render(_room(resolution=(8, 6)), RenderSettings(samples=1, bounces=0)).report
+    assert any(str(path) in w and "not valid JSON" in w for w in report["warnings"])
+    assert report["estimate"]["rates"] == str(estimate.DEFAULT_RATES_PATH)
+
+
+def test_shipped_rates_are_complete_and_packaged():
+    rates = estimate.read_rates(estimate.DEFAULT_RATES_PATH)
+    assert set(rates.seconds) == set(estimate.RATE_KEYS)
+    assert all(v > 0 for v in rates.seconds.values()) and set(rates.raw) == set(estimate.RAW_KEYS)
+    with open(ROOT / "pyproject.toml", "rb") as f:
+        setuptools = tomllib.load(f)["tool"]["setuptools"]
+    assert "data/*.json" in setuptools["package-data"]["lanterna.engine"]
+    with pytest.raises(estimate.RatesError, match="cannot be read"):
+        estimate.read_rates(ROOT / "no-such-rates.json")
+
+
+# -- The command line and the panel (Blender) -------------------------------------------------
+def test_dry_run_prints_the_plan_and_table_and_writes_nothing(tmp_path, capfd):
+    pytest.importorskip("bpy")
+    from lanterna.engine.blender import cli, registration
+
+    was = registration.is_registered()
+    folder = tmp_path / "out"
+    folder.mkdir()
+    try:
+        out = folder / "never.exr"
+        for extra in ([], ["-o", str(out), "--report", str(folder / "never.json")]):
+            capfd.readouterr()
+            code = cli.main(["render", "--scene", "scene1", "--resolution", "40x30",
+                             "--preset", "preview", "--dry-run", *extra])
+            captured = capfd.readouterr()
+            assert code == 0, captured.err
+            text = captured.out
+            for word in ("plan:", "photons", "irradiance_cache", "camera", "total",
+                         "peak memory", "nothing rendered, nothing written"):
+                assert word in text, word
+            assert "40x30 px, 4 spp, preset preview" in text
+        assert list(folder.iterdir()) == []
+        assert not estimate.user_rates_path().exists()
+        # Without --dry-run the output is still required.
+        assert cli.main(["render", "--scene", "scene1"]) == 2
+        assert "required: -o/--output" in capfd.readouterr().err
+    finally:
+        if not was:
+            registration.unregister()
+
+
+def test_render_panel_shows_the_estimate_of_the_current_settings():
+    pytest.importorskip("bpy")
+    import test_ui as ui
+    from lanterna.engine.blender import calibrate, export, registration
+    from lanterna.ui import panels
+
+    was = registration.is_registered()
+    registration.register()
+    try:
+        import bpy
+
+        scene, *_ = ui.build_scene('POINT')
+        ctx = ui.context_for(scene)
+        panel = panels.LANTERNA_RENDER_PT_estimate
+        assert panel.bl_parent_id == "LANTERNA_RENDER_PT_sampling"
+        shown = ui.labels(ui.draw(panel, ctx))
+        assert "Total" in shown
+        expected = estimate.estimate_cost(
+            export.export_scene(bpy.context.evaluated_depsgraph_get()),
+            export.export_settings(scene))
+        assert estimate.format_seconds(expected.seconds) in shown
+        assert f"peak {estimate.format_bytes(expected.peak_bytes)}" in shown
+        # A settings change shows at once (the facts are cached, the estimate recomputed).
+        before = calibrate.panel_estimate(ctx)[0].stages["camera"].counts["camera_rays"]
+        scene.lanterna.samples *= 4
+        after = calibrate.panel_estimate(ctx)[0].stages["camera"].counts["camera_rays"]
+        assert after == 4 * before
+    finally:
+        if not was:
+            registration.unregister()
