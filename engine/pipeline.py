@@ -27,9 +27,12 @@ Stages, in order (DESIGN.md §1)
                                Perfect specular surfaces reflect the camera ray (up to
                                ``max_specular_depth``).
 
-    Batches are independent (each has its own random stream from (seed, batch)), so they run
-    on a thread pool (embreex and numpy release the GIL) and a fixed seed gives the same
-    picture whatever the scheduling. Between batches ``progress(fraction, text)`` is called
+    Batches are square blocks of the full frame (64 x 64 pixels at 16 spp), each with its own
+    random stream from (seed, block number), so they run on a thread pool (embreex and numpy
+    release the GIL) and a fixed seed gives the same picture whatever the scheduling or the
+    thread count. A render border renders the blocks it meets and keeps its part of them;
+    with automatic counts and the cache placed over the full frame, tiles of a still
+    reassemble into the full render pixel for pixel (a farm can split a still). Between batches ``progress(fraction, text)`` is called
     and ``cancelled()`` is polled; a batch takes well under a second, so Esc acts quickly.
 
 Settings (``RenderSettings``)
@@ -259,7 +262,9 @@ def _cache_prepass(scene, accel, arrays, gather: _FinalGather, settings, pool, t
     from .irradiance_cache import (IrradianceCache, clamp_radius, frames_from_normals,
                                    irradiance_and_gradients, limit_translational_gradient)
 
-    cam = scene.camera
+    # Over the full frame, whatever the render border: a tile of a still gets the records the
+    # whole frame would (so tiles reassemble into the full render, pixel for pixel).
+    cam = replace(scene.camera, border=None)
     width, height = cam.window_size
     rng = sampling.rng_for(settings.seed, sampling.STREAM_GATHER, 1 << 20)
     origins, directions, tmax = pixel_rays(cam, 0, width * height, 1, rng, centres=True)
@@ -381,10 +386,55 @@ class _FinalGather:
         return self.gather(x, ns, ng, rng, stats)[0]
 
 
+@dataclass
+class CameraBlock:
+    """One camera batch: a square block of the full frame (``camera``: the frame's camera
+    with its border set to the block). ``index`` numbers the block in the full frame and
+    seeds its random stream, so a block's pixels come out the same whatever render border
+    (tile) it is rendered for; ``source`` picks the block's pixels inside the window and
+    ``target`` says where they go in the window image (flat, row-major, top row first)."""
+
+    index: int
+    camera: object
+    pixels: int
+    source: np.ndarray
+    target: np.ndarray
+
+
+def camera_blocks(camera, samples: int) -> list[CameraBlock]:
+    """The full-frame blocks that meet ``camera``'s render window, in window order. A block
+    is B x B pixels with B = sqrt(TARGET_BATCH_SAMPLES / samples) rounded down to a multiple
+    of 8 (64 at 16 spp), clipped to the frame; blocks are numbered row by row from the
+    frame's bottom-left, as Blender counts border coordinates."""
+    side = max(8, int(np.sqrt(TARGET_BATCH_SAMPLES / max(1, samples))) // 8 * 8)
+    full_w, full_h = camera.resolution
+    wx0, wy0, wx1, wy1 = camera.border
+    win_w = wx1 - wx0
+    columns = -(-full_w // side)
+    out = []
+    for by in range(wy0 // side, -(-wy1 // side)):
+        for bx in range(wx0 // side, -(-wx1 // side)):
+            x0, y0 = bx * side, by * side
+            x1, y1 = min(x0 + side, full_w), min(y0 + side, full_h)
+            bw = x1 - x0
+            # the block's pixels inside the window: block rows run top-down from y1 - 1
+            ys = np.arange(max(y0, wy0), min(y1, wy1))
+            xs = np.arange(max(x0, wx0), min(x1, wx1))
+            yy, xx = np.meshgrid(ys, xs, indexing="ij")
+            source = ((y1 - 1 - yy) * bw + (xx - x0)).ravel()
+            target = ((wy1 - 1 - yy) * win_w + (xx - wx0)).ravel()
+            out.append(CameraBlock(index=by * columns + bx,
+                                   camera=replace(camera, border=(x0, y0, x1, y1)),
+                                   pixels=bw * (y1 - y0), source=source, target=target))
+    # window order (top rows first), so progress sweeps down the picture
+    out.sort(key=lambda b: (-b.camera.border[1], b.camera.border[0]))
+    return out
+
+
 def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArrays,
                         accel: Accelerator, lights: LightSet, settings: RenderSettings,
                         ray_log: list | None, photon=None, shadow_map=None,
-                        track_usage: bool = False):
+                        track_usage: bool = False, camera=None):
     """Radiance for the pixels of one batch, mean over their samples, by kind: (3, pixels, 3)
     for emission (surfaces and the world seen from the camera or in mirrors), direct light
     and indirect light (in ``photon-map`` mode: the whole estimate); their sum is Combined.
@@ -397,7 +447,8 @@ def _shade_camera_batch(batch: int, pixel_range, scene: Scene, arrays: _SceneArr
     rng = sampling.rng_for(settings.seed, sampling.STREAM_CAMERA, batch)
     p0, p1 = pixel_range
     spp = settings.samples
-    origins, directions, tmax = pixel_rays(scene.camera, p0, p1, spp, rng, settings.filter_width)
+    origins, directions, tmax = pixel_rays(camera or scene.camera, p0, p1, spp, rng,
+                                           settings.filter_width)
     count = len(origins)
     # Sums of the samples' radiance per pixel, by kind (the Emission, Direct and Indirect
     # passes; Combined is their sum): every contribution goes straight to its pixel.
@@ -600,8 +651,9 @@ def _prepare(scene: Scene, settings: RenderSettings, progress, cancelled, artifa
         report["warnings"].append("Scene: no lights, no emissive materials and a black world; "
                                   "the image is black")
 
-    width, height = scene.camera.window_size
-    pixel_count = width * height
+    # Automatic counts follow the full frame, not the border window (tiles agree).
+    full_w, full_h = scene.camera.resolution
+    pixel_count = full_w * full_h
     arrays = _SceneArrays(scene)
     pool = ThreadPoolExecutor(settings.worker_count)
     prep = _Prepared(report=report, stage=stage, tell=tell, accel=accel, lights=lights,
@@ -724,9 +776,13 @@ def bake(scene: Scene, settings: RenderSettings | None = None, progress=None,
     overlays, to save next to the .blend, or to render with later: ``render(...,
     artifacts=...)`` gives the same picture as a render that builds them itself)."""
     settings = (settings or RenderSettings()).resolved().validate()
+    # Issue 6: the cost estimate before any work; refuses what cannot fit in memory.
+    from .estimate import preflight
+    estimate = preflight(scene, settings, camera=False)
     prep = _prepare(scene, settings, progress, cancelled, None)
     try:
         artifacts = _artifacts_of(prep, scene, settings)
+        artifacts.report["estimate"] = estimate
         artifacts.report["total_seconds"] = round(time.perf_counter() - prep.total_start, 6)
         artifacts.report["plan"] = prep.report["plan"]
         artifacts.report["cancelled"] = prep.was_cancelled
@@ -791,8 +847,13 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
 
     settings = (settings or RenderSettings()).resolved().validate()
     wanted = parse_passes(passes)
+    # Issue 6: the cost estimate before any work; refuses what cannot fit in memory.
+    from .estimate import preflight
+    estimate = preflight(scene, settings, wanted, reused=artifacts is not None)
     prep = _prepare(scene, settings, progress, cancelled, artifacts)
     report, stage, tell = prep.report, prep.stage, prep.tell
+    report["estimate"] = estimate
+    report["warnings"].extend(estimate.get("warnings", ()))
     stages = report["stages"]
     accel, lights, arrays, pool = prep.accel, prep.lights, prep.arrays, prep.pool
     photon, shadow_map, cache = prep.photon, prep.shadow_map, prep.cache
@@ -800,10 +861,9 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
     width, height = scene.camera.window_size
     pixel_count = width * height
 
-    # 5. camera: batches of whole pixels over a thread pool
+    # 5. camera: blocks of the full frame over a thread pool
     track_usage = "CacheUsage" in wanted and isinstance(photon, _CachedIndirect)
-    batch_pixels = max(1, TARGET_BATCH_SAMPLES // settings.samples)
-    ranges = [(p, min(p + batch_pixels, pixel_count)) for p in range(0, pixel_count, batch_pixels)]
+    blocks = camera_blocks(scene.camera, settings.samples)
     image = np.zeros((pixel_count, 3), np.float32)
     split = [name for name in ("Emission", "Direct", "Indirect") if name in wanted]
     kinds = {name: np.zeros((pixel_count, 3), np.float32) for name in split}
@@ -813,37 +873,39 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
     t0 = time.perf_counter()
     done = 0
     label = "Rendering" if settings.mode == "full" else "Photon map"
-    tell(0.0, f"{label}: 0/{len(ranges)} batches")
+    tell(0.0, f"{label}: 0/{len(blocks)} batches")
     try:
         with pool:
             pending = {}
-            queue = [] if was_cancelled else list(enumerate(ranges))
+            queue = [] if was_cancelled else list(blocks)
             queue.reverse()
 
             def submit():
                 while queue and len(pending) < 2 * settings.worker_count:
-                    batch, rng_ = queue.pop()
-                    fut = pool.submit(_shade_camera_batch, batch, rng_, scene, arrays, accel,
-                                      lights, settings, ray_log, photon, shadow_map, track_usage)
-                    pending[fut] = rng_
+                    block = queue.pop()
+                    fut = pool.submit(_shade_camera_batch, block.index, (0, block.pixels), scene,
+                                      arrays, accel, lights, settings, ray_log, photon,
+                                      shadow_map, track_usage, block.camera)
+                    pending[fut] = block
 
             submit()
             while pending:
                 finished, _ = wait(list(pending), return_when=FIRST_COMPLETED)
                 for fut in finished:
-                    a, b = pending.pop(fut)
+                    block = pending.pop(fut)
                     parts, batch_stats, batch_usage = fut.result()
-                    image[a:b] = parts[0] + parts[1] + parts[2]
+                    src, dst = block.source, block.target
+                    image[dst] = (parts[0] + parts[1] + parts[2])[src]
                     for index, name in enumerate(("Emission", "Direct", "Indirect")):
                         if name in kinds:
-                            kinds[name][a:b] = parts[index]
+                            kinds[name][dst] = parts[index][src]
                     if usage is not None:
-                        usage[a:b] = batch_usage
+                        usage[dst] = batch_usage[src]
                     for key in BATCH_COUNTERS:
                         totals[key] += batch_stats[key]
                     totals["batch_seconds"] += batch_stats["seconds"]
                     done += 1
-                tell(done / len(ranges), f"{label}: {done}/{len(ranges)} batches")
+                tell(done / len(blocks), f"{label}: {done}/{len(blocks)} batches")
                 if cancelled is not None and cancelled():
                     was_cancelled = True
                     queue.clear()
@@ -853,7 +915,7 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
         raise
     camera_seconds = time.perf_counter() - t0
     rays = totals["camera_rays"] + totals["shadow_rays"] + totals["specular_rays"]
-    stage("camera", camera_seconds, batches=len(ranges), batches_done=done,
+    stage("camera", camera_seconds, batches=len(blocks), batches_done=done,
           camera_rays=totals["camera_rays"], shadow_rays=totals["shadow_rays"],
           specular_rays=totals["specular_rays"],
           trace_thread_seconds=round(totals["trace_seconds"], 6),

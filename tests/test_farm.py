@@ -202,13 +202,10 @@ def test_border_render_window_is_the_region_of_the_full_frame(registered, tmp_pa
     assert tile.mean() == pytest.approx(full[:12, 16:].mean(), rel=0.05)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "tiles are not yet pixel-identical to the full frame: the camera stage's random streams "
-    "are numbered by batches of the border window, the default photon count and look-ups "
-    "follow the window's pixel count, and the irradiance cache is placed over the window only "
-    "(engine/pipeline.py, engine/camera.py)"))
 def test_tiles_reassemble_the_full_frame_pixel_for_pixel(registered, tmp_path):
-    """A farm splitting a still into 2 x 2 border renders gets exactly the full render back."""
+    """A farm splitting a still into 2 x 2 border renders gets exactly the full render back:
+    the camera works in blocks of the full frame with their own random streams, automatic
+    counts follow the full frame and the irradiance cache is placed over the full frame."""
     scene = room(tmp_path, moving_light=False)
     full = render_frame(scene, 1, tmp_path / "full.exr")
     render = scene.render
