@@ -84,7 +84,7 @@ def _scene():
 
 def test_pipeline_same_seed_same_image_for_one_and_two_threads():
     """140k photons: two photon chunks of 131072 traced in parallel; the radiance estimates
-    and the cache passes on the pool; 2 camera batches of 512 pixels x 128 samples (k = 10 and
+    and the cache passes on the pool; camera blocks of 16 x 16 pixels x 128 samples (k = 10 and
     one look-up per pixel keep it cheap: the order of the work is what is tested). Shadow
     photons are checked on their own below (their automatic count would dominate the time)."""
     settings = dict(seed=9, photons=140_000, photon_k=10, samples=128, light_samples=1,
@@ -95,7 +95,7 @@ def test_pipeline_same_seed_same_image_for_one_and_two_threads():
                         passes=("direct", "indirect"))
         stages = result.report["stages"]
         assert {"photons", "radiance_estimates", "irradiance_cache", "camera"} <= set(stages)
-        assert stages["camera"]["batches"] == 2           # 65536 samples a batch
+        assert stages["camera"]["batches"] >= 2           # blocks of the frame, in parallel
         assert result.report["seed"] == 9
         assert np.isfinite(result.image).all() and result.image.max() > 0
         results[threads] = result
