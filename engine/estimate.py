@@ -34,12 +34,12 @@ the cache is placed over it, so a tile (render border) renders as its part of th
                            an upper bound otherwise, and shadow photons save some)
     specular rays          B S sum_{d=1..depth} s^d, s = area share of specular surfaces
     photons emitted        N = ``photons`` or ``auto_photon_count(F)`` (exact)
-    photon rays            N (1 + c rho_1 sum_{i=0..B-1} (c rho)^i): a Russian-roulette path
+    photon rays            N (1 + c rho_1 sum_{i=0..n-1} (c rho)^i): a Russian-roulette path
                            (seed 9.2) hits something with probability c and survives a hit
                            with probability rho, the area-weighted mean of the materials'
                            channel-averaged P_d + P_s (rho_1 at the first hit: the mean over
                            triangles weighted by the solid angle each subtends at the point,
-                           spot or area lights, occlusion ignored), for at most B =
+                           spot or area lights, occlusion ignored), for at most n =
                            ``bounces`` bounces. c, the closure, is the share of the faces of
                            the scene's bounds (with the camera) that triangles lying in them
                            cover: 1 for a closed room, 0.28 for a lone floor. Exact in
@@ -53,9 +53,9 @@ the cache is placed over it, so a tile (render border) renders as its part of th
     cache records          tan(fov/2) exp(c0 + c1 ln F + c2 ln a + c3 ln F ln a), clipped to
                            [ceil(w/32) ceil(h/32), F] (w x h the frame): a least-squares fit
                            to the records the placement passes made on the seed's two scenes
-                           (160x120 and 640x480,
-                           a = 0.1 and 0.3) and two other rooms at fields of view of 40, 60
-                           and 90 degrees (160x120, a = 0.2): within a factor 1.8 of all 14
+                           (160x120 and 640x480, a = 0.1 and 0.3) and two other rooms at
+                           fields of view of 40, 60 and 90 degrees (160x120, a = 0.2): within
+                           a factor 1.8 of all 14
                            (seed scenes: 0.77-1.16). A wider view sees more corners and edges
                            per pixel, where records of the minimum reach (1.5 pixels) crowd.
     gathered look-ups      cache: look-ups x f, f = exp(u0) F^u1 a^u2 (the share no record
@@ -83,19 +83,18 @@ Time [s] (rates: seconds per unit, measured with ``rates.workers`` threads)
     scene's and a large mesh); ray rates are shifted by the difference of the raw cost at T
     and at the calibration scene's count (interpolated in ln T, extrapolated above; no
     shift below the calibration scene's count). The k-nearest rates are not shifted with the
-    size of the photon map: raw pykdtree queries in random order slow 3-6x from 50k to 3M
-    points, but the renderer asks in Morton order or in batches of nearby points, and its
+    size of the photon map: raw pykdtree queries slow 2.5-6x from 50k to 3M points (k = 4
+    to 128), but the renderer asks in Morton order or in batches of nearby points, and its
     estimate rate measured the same (7.5-7.8 us) at 0.75M and at 2.7-4.4M stored photons.
 
-Speed (a shared machine)
-    Rates are wall time on the machine as it was while they were measured. Other work on a
-    shared machine (measured here: the same render took 31 s and 60 s an hour apart) slows a
-    render as a whole, so a fixed probe (``speed_probe``: random numbers, a sort and a gather
-    of 65k values on each of W threads at once, the median of three, about 30 ms) is timed
-    before each calibration measurement (the mean goes into the rates file as ``probe``) and
-    before an estimate; times are scaled by probe now / ``rates.probe`` (clamped to
-    [1/3, 3]). ``preflight`` probes where the estimate exceeds ``PROBE_ABOVE`` (5 s); the dry
-    run and the check always do; the render panel does not (factor 1).
+A shared machine
+    Rates are wall time on the machine as it was while they were measured; other work slows
+    a render as a whole (here the same render of Scene 1 at 640x480, final, took 18 s on a
+    quiet machine and 120 s beside other jobs; pykdtree's OpenMP queries suffer most: the
+    estimates of Scene 1 at 640x480, preview, took 0.8 s and 19.7 s). Scaling by a short
+    speed probe before each render was tried and dropped: over renders of 30-120 s the load
+    changed more than a 50 ms probe could tell, and the probe's own scatter made the estimate
+    worse.
 
 Memory [bytes] (keeps: held until the render ends; working: while the stage runs)
     accel_build        keeps 140 T (Embree's BVH and the float32 corners, measured by RSS at
@@ -113,8 +112,9 @@ Memory [bytes] (keeps: held until the render ends; working: while the stage runs
                        (W min(524288, gathered per batch x G) x 500) + photon look-ups
                        (W 8192 k 60)
     The peak is the largest (keeps of the stages so far + the stage's working memory).
-    Checked with tracemalloc on the seed scenes: 483 MB measured against 489 MB predicted
-    (Scene 1, 640x480, final), 532 against 608 MB (Scene 2, 160x120, final).
+    Checked with tracemalloc (which sees numpy's allocations, not Embree's or the kd-trees')
+    on the seed scenes, final preset: peak 502 MB measured against 505 MB predicted (Scene 1,
+    640x480), 789 against 741 MB (Scene 2, 160x120); per stage 0.85-1.26 of the measured.
 
 Rates files (JSON, ``RATES_SCHEMA``)
     ``engine/data/rates.json`` ships with Lanterna (measured on the development machine);
@@ -152,7 +152,7 @@ RATE_KEYS = {
     "photon_ray": "photon tracing: per photon ray (roulette, storing)",
     "photon_store": "photon map build: per stored photon (Morton order, kd-tree; one thread)",
     "radiance_estimate": "irradiance at a photon, k = 50: per estimate",
-    "cache_pixel": "cache placement passes: per window pixel (centre rays, coverage; one thread)",
+    "cache_pixel": "cache placement passes: per frame pixel (centre rays, coverage; one thread)",
     "gather_ray": "final gather: per ray (trace, look-up of the precomputed estimates)",
     "gather_point": "final gather: per point (photon-guided allocation, sums, gradients)",
     "shadow_photon": "shadow photons: per photon (emit, trace through, index, classify)",
@@ -189,11 +189,10 @@ PIXEL_BUFFER_BYTES = 12
 SAMPLE_WORK_BYTES = 640
 K_OFFSET = 10                        # estimate cost ~ (k + K_OFFSET) / (50 + K_OFFSET)
 
-# Fits to the seed scenes (module docstring): records and the share of uncovered look-ups.
+# Fits (module docstring): cache records (seed scenes and two rooms), uncovered look-ups.
 RECORD_FIT = (2.50988, 0.21102, -0.43463, -0.10136)   # x tan(half field of view)
 UNCOVERED_FIT = (-1.3806, -0.75355, -1.71473)
 
-PROBE_ABOVE = 5.0                    # s: renders estimated longer probe the machine's speed
 GIB = float(1 << 30)
 
 
@@ -214,11 +213,10 @@ class Rates:
     measured: str = ""
     source: str = ""
     warnings: list = field(default_factory=list)
-    probe: float | None = None         # ``speed_probe`` seconds while measuring
 
     def to_json(self) -> dict:
         return {"schema": RATES_SCHEMA, "workers": self.workers, "cores": self.cores,
-                "measured": self.measured, "probe": self.probe, "seconds": dict(self.seconds),
+                "measured": self.measured, "seconds": dict(self.seconds),
                 "raw": dict(self.raw),
                 "units": {k: f"seconds per unit: {v}" for k, v in RATE_KEYS.items()}}
 
@@ -255,13 +253,8 @@ class Rates:
         if all(isinstance(raw.get(k), (int, float)) and not isinstance(raw.get(k), bool)
                and math.isfinite(raw[k]) and raw[k] > 0 for k in RAW_KEYS):
             raw_ok = {k: float(raw[k]) for k in RAW_KEYS}
-        probe = data.get("probe")
-        if probe is not None and (isinstance(probe, bool) or not isinstance(probe, (int, float))
-                                  or not math.isfinite(probe) or probe <= 0):
-            raise RatesError(f"probe = {probe!r} is not a finite number > 0")
         return cls(seconds=out, workers=workers, cores=cores, raw=raw_ok,
-                   measured=str(data.get("measured", "")), source=source,
-                   probe=None if probe is None else float(probe))
+                   measured=str(data.get("measured", "")), source=source)
 
 
 def user_rates_path() -> Path:
@@ -362,42 +355,6 @@ def available_memory() -> int | None:
         return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
     except (ValueError, OSError, AttributeError):
         return None
-
-
-# -- The machine's speed now -------------------------------------------------------------------
-PROBE_VALUES = 1 << 16
-
-
-def _probe_work(seed: int) -> float:
-    rng = np.random.default_rng(seed)
-    x = rng.random(PROBE_VALUES)
-    y = np.take(x, np.argsort(x))
-    return float(np.cumsum(y)[-1])
-
-
-def speed_probe(workers: int | None = None, repeat: int = 3) -> float:
-    """Wall seconds of a fixed piece of work (random numbers, a sort, a gather: what the
-    renderer's numpy does) run once on each of ``workers`` threads at once (default: all
-    cores); the median of ``repeat`` runs."""
-    from concurrent.futures import ThreadPoolExecutor
-
-    workers = max(1, int(workers or os.cpu_count() or 1))
-    times = []
-    with ThreadPoolExecutor(workers) as pool:
-        for _ in range(repeat):
-            t0 = time.perf_counter()
-            list(pool.map(_probe_work, range(workers)))
-            times.append(time.perf_counter() - t0)
-    return float(np.median(times))
-
-
-def speed_factor(probe: float | None, rates: "Rates") -> float:
-    """How much slower than while the rates were measured the machine runs now: ``probe``
-    (``speed_probe`` seconds now) over ``rates.probe``, clamped to [1/3, 3]; 1 where either
-    is unknown."""
-    if probe is None or not rates.probe:
-        return 1.0
-    return float(np.clip(probe / rates.probe, 1 / 3, 3.0))
 
 
 # -- What the estimate needs from a scene ------------------------------------------------------
@@ -642,7 +599,6 @@ class Estimate:
     workers: int
     available_bytes: int | None = None
     warnings: list = field(default_factory=list)
-    speed: dict = field(default_factory=dict)     # the speed probe now and calibrated, factor
 
     def biggest(self, n: int = 2) -> list:
         """The ``n`` stages whose memory (keeps + working) is largest: (name, bytes)."""
@@ -657,7 +613,7 @@ class Estimate:
     def _report(self) -> dict:
         return {"seconds": round(self.seconds, 4), "peak_bytes": int(self.peak_bytes),
                 "peak_stage": self.peak_stage, "available_bytes": self.available_bytes,
-                "workers": self.workers, "rates": self.rates_source, "speed": dict(self.speed),
+                "workers": self.workers, "rates": self.rates_source,
                 "stages": {k: v.to_dict() for k, v in self.stages.items()},
                 "facts": self.facts.to_dict(), "warnings": list(self.warnings)}
 
@@ -673,11 +629,7 @@ class Estimate:
                  if self.available_bytes is not None else "")
         lines.append(f"{'total':<20}{format_seconds(self.seconds):>10}  peak memory "
                      f"{format_bytes(self.peak_bytes)} (during {self.peak_stage}){avail}")
-        now, then = self.speed.get("probe_seconds"), self.speed.get("calibration_probe_seconds")
-        if now is not None and then is not None:
-            lines.append(f"{'':<20}{'':>10}  times x {self.speed['factor']:.2f}: the speed "
-                         f"probe took {now * 1e3:.0f} ms ({then * 1e3:.0f} ms while the rates "
-                         "were measured)")
+
         return "\n".join(lines)
 
 
@@ -772,12 +724,11 @@ def _trace_shift(rates: Rates, triangles: int, kind: str) -> float:
 
 def estimate_from_facts(facts: SceneFacts, settings, rates: Rates | None = None, passes=(),
                         reused: bool = False, available: int | None = None,
-                        camera: bool = True, probe: float | None = None) -> Estimate:
+                        camera: bool = True) -> Estimate:
     """The estimate for ``facts`` and ``settings`` (``RenderSettings``; the preset is applied
     here). ``reused``: the maps come from ``bake`` or a file (no photon, cache or
     shadow-photon work and no new memory for them). ``available``: bytes, for the report.
-    ``camera`` False: the stages of ``bake`` only (no camera, no passes). ``probe``: the
-    ``speed_probe`` seconds now, for ``speed_factor``; None: the machine as calibrated."""
+    ``camera`` False: the stages of ``bake`` only (no camera, no passes)."""
     from .pipeline import auto_lookups
     from .shadow_photons import (AUTO_SPACING, DEFAULT_K, DEFAULT_MARGIN, MAX_AUTO_COUNT,
                                  MIN_AUTO_COUNT, neighbours_queried)
@@ -788,7 +739,6 @@ def estimate_from_facts(facts: SceneFacts, settings, rates: Rates | None = None,
     P, spp, T = facts.pixels, int(s.samples), facts.triangles
     W = min(s.worker_count, os.cpu_count() or 1)
     scale = min(rates.workers, rates.cores) / max(W, 1)
-    full = s.mode == "full"
     F = facts.frame_pixels            # automatic counts follow the full frame (pipeline.py)
     shaded, batches, block = camera_blocks(facts.frame, facts.border, spp)
     pc = _photon_counts(facts, s, plan, F) if plan["photons"] else {}
@@ -857,7 +807,7 @@ def estimate_from_facts(facts: SceneFacts, settings, rates: Rates | None = None,
     from .passes import parse_passes
     wanted = parse_passes(passes)
     if not camera:
-        return _finish(stages, plan, facts, s, rates, W, available, probe)
+        return _finish(stages, plan, facts, s, rates, W, available)
     camera_rays = shaded * spp
     depth = s.max_specular_depth if plan["specular"] else 0
     spec = min(facts.specular_share, 0.999)
@@ -905,7 +855,7 @@ def estimate_from_facts(facts: SceneFacts, settings, rates: Rates | None = None,
         add("passes", seconds, len(diagnostic) * P * PIXEL_BUFFER_BYTES, P * CACHE_PIXEL_BYTES,
             passes=len(diagnostic))
 
-    return _finish(stages, plan, facts, s, rates, W, available, probe)
+    return _finish(stages, plan, facts, s, rates, W, available)
 
 
 def _photon_counts(facts: SceneFacts, s, plan, pixels: int) -> dict:
@@ -926,12 +876,9 @@ def _photon_counts(facts: SceneFacts, s, plan, pixels: int) -> dict:
                 estimates=estimates)
 
 
-def _finish(stages, plan, facts, settings, rates, workers, available, probe) -> Estimate:
-    """Times scaled by the speed factor; totals; the peak is the largest keeps of the stages
-    so far + a stage's working memory."""
-    factor = speed_factor(probe, rates)
-    for stage in stages.values():
-        stage.seconds *= factor
+def _finish(stages, plan, facts, settings, rates, workers, available) -> Estimate:
+    """Totals; the peak is the largest keeps of the stages so far + a stage's working
+    memory."""
     kept, peak, peak_stage = 0, 0, "validate"
     for stage in stages.values():
         stage.peak = kept + stage.keeps + stage.working
@@ -941,23 +888,17 @@ def _finish(stages, plan, facts, settings, rates, workers, available, probe) -> 
     return Estimate(stages=stages, seconds=sum(v.seconds for v in stages.values()),
                     peak_bytes=int(peak), peak_stage=peak_stage, plan=plan.to_report(),
                     facts=facts, settings=asdict(settings), rates_source=rates.source,
-                    workers=workers, available_bytes=available, warnings=list(rates.warnings),
-                    speed={"probe_seconds": probe, "calibration_probe_seconds": rates.probe,
-                           "factor": factor})
+                    workers=workers, available_bytes=available, warnings=list(rates.warnings))
 
 
 def estimate_cost(scene, settings=None, rates: Rates | None = None, passes=(),
-                  reused: bool = False, measure_speed: bool = False) -> Estimate:
-    """The estimate of rendering ``scene`` with ``settings`` (module docstring);
-    ``measure_speed``: time the ``speed_probe`` (about 30 ms) and scale the times by
-    ``speed_factor``."""
+                  reused: bool = False) -> Estimate:
+    """The estimate of rendering ``scene`` with ``settings`` (module docstring)."""
     from .pipeline import RenderSettings
 
     settings = settings or RenderSettings()
     return estimate_from_facts(scene_facts(scene), settings, rates, passes, reused,
-                               available_memory(),
-                               probe=speed_probe(settings.worker_count) if measure_speed
-                               else None)
+                               available_memory())
 
 
 def check_memory(estimate: Estimate, available: int | None = None) -> None:
@@ -1006,9 +947,6 @@ def preflight(scene, settings, passes=(), reused: bool = False, camera: bool = T
             RatesError) as exc:
         return {"error": f"{type(exc).__name__}: {exc}"}
     check_memory(estimate, available)
-    if estimate.seconds > PROBE_ABOVE:          # worth 30 ms: how fast is the machine now?
-        estimate = estimate_from_facts(facts, settings, rates, passes, reused, available,
-                                       camera, speed_probe(settings.worker_count))
     out = estimate.to_report()
     out["estimate_seconds"] = round(time.perf_counter() - t0, 6)
     return out

@@ -24,11 +24,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from analytic import box_room, plane_scene, quad
+from analytic import box_room, plane_scene
 from lanterna.engine import estimate, pipeline
 from lanterna.engine.blender.calibrate import calibration_scene
 from lanterna.engine.pipeline import RenderSettings, bake, render
-from lanterna.engine.scene import AreaLight, Camera, Material, PointLight, Scene, SceneError
+from lanterna.engine.scene import Camera, Material, PointLight, Scene, SceneError
 
 ROOT = Path(__file__).resolve().parent.parent
 

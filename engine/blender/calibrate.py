@@ -11,16 +11,14 @@ What it computes (``lanterna bench --calibrate`` / ``lanterna bench --check-esti
     2. pipeline renders of the calibration scene, each stage's time divided by the counts
        its report gives (``engine/estimate.py`` names the rates):
        direct light only with 1 and with 4 point lights at 160x120, 16 spp (camera sample
-       and shadow ray rates, a 2 x 2 solve); an area light with 8 light samples and shadow
+       and shadow ray rates, non-negative least squares); an area light with 8 light samples and shadow
        photons (light sample and shadow photon rates); final gathers at every pixel with
-       6x24 and 12x48 strata at 40x30 and 1x4 at 96x72 (gather ray and gather point rates,
-       non-negative least squares); irradiance-cache renders at 320x240 and 640x480, 1 spp,
-       300k photons, 4x12 strata, a = 0.3 (photon emission, tracing and map build; radiance
-       estimates; the placement passes' per-pixel cost after their gathers; cache look-ups);
-       and a photon-map look-up render.
-    Before each measurement the machine's speed is probed (``estimate.speed_probe``, as the
-    estimate probes it before a render); the mean goes into the rates file (``probe``) for the
-    estimate's speed factor.
+       6x24 and 12x48 strata at 40x30 and 1x4 at 96x72 (the gather point rate, non-negative
+       least squares over rays and points); irradiance-cache renders at 320x240 and 640x480
+       with 4x12 strata and at 320x240 with 12x48, 1 spp, 300k photons, a = 0.3 (photon
+       emission, tracing and map build; radiance estimates; the placement passes' cost per
+       pixel and per gather ray, non-negative least squares; cache look-ups); and a
+       photon-map look-up render.
     Writes the rates (JSON) to ``--rates-file`` (default ``$XDG_CACHE_HOME/lanterna/
     rates.json`` or ``~/.cache/lanterna/rates.json``) and prints them.
 
@@ -28,15 +26,16 @@ What it computes (``lanterna bench --calibrate`` / ``lanterna bench --check-esti
     ``--check-resolutions`` (default 160x120,640x480) with the ``preview`` and ``final``
     presets: the estimate (from the rates just written, or the user's / shipped rates with
     ``--check-estimate``), then the render, and prints predicted and measured pipeline time,
-    their ratio and PASS where it lies within [1/1.5, 1.5], with the estimate's speed factor,
-    the other processes' busy cores during the renders and the per-stage times. A
-    benchmark, not a test: the machine is shared, so this is a printout, never an assertion.
+    their ratio and PASS where it lies within [1/1.5, 1.5], with the other processes' busy
+    cores during the renders (``LoadMeter``) and the per-stage times. A benchmark, not a
+    test: the machine is shared, so this is a printout, never an assertion.
 
     ``panel_estimate(context)``: the estimate the render panel shows (``ui/panels.py``,
     ``LANTERNA_RENDER_PT_estimate``). The scene's facts (``estimate.scene_facts``) need an
     export, too slow to repeat on every redraw of a big scene, so they are cached under a cheap
     signature of the depsgraph (per evaluated object: name, type, polygon and vertex counts,
-    materials; per light: type, power, size, flags; the world; the camera); the estimate itself
+    materials; per light: type, power, size, flags; the world; the camera and its lens); the
+    estimate itself
     is recomputed from the cached facts on every redraw (arithmetic), so changes of the
     settings and the resolution show at once. A scene whose signature changed is exported again
     when it has at most ``LIVE_EXPORT_TRIANGLES`` polygons; a bigger one keeps its older facts,
@@ -55,7 +54,6 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import json
 import os
 import sys
 import time
@@ -236,13 +234,11 @@ def _fastest(reports) -> dict:
     return stages
 
 
-def _render(scene, tell, label, repeat=REPEAT, probes=None, **settings):
+def _render(scene, tell, label, repeat=REPEAT, **settings):
     from ..pipeline import RenderSettings, render
 
     tell(label)
     s = RenderSettings(**{"seed": 1, **settings})
-    if probes is not None:              # the machine's speed at this moment (estimate.py)
-        probes.append(est.speed_probe(s.worker_count))
     return _fastest([render(scene, s).report for _ in range(max(1, repeat))]), s
 
 
@@ -265,8 +261,7 @@ def measure_rates(threads=0, tell=print, repeat=REPEAT) -> est.Rates:
     from ..pipeline import RenderSettings
 
     workers = RenderSettings(threads=threads).worker_count
-    probes = [est.speed_probe(workers)]
-    run = partial(_render, repeat=repeat, probes=probes)
+    run = partial(_render, repeat=repeat)
 
     r = {}
     raw = _raw_rays(workers, tell)
@@ -308,12 +303,17 @@ def measure_rates(threads=0, tell=print, repeat=REPEAT) -> est.Rates:
         cam = stages["camera"]
         rows.append((cam["gather_rays"], cam["gather_points"]))
         ys.append(cam["seconds"] - direct_part(cam))
-    r["gather_ray"], r["gather_point"] = _nonnegative_fit(rows, ys, tiny)
+    # (the gather-mode renders give the per-point cost; the per-ray cost comes from the cache
+    # renders below, whose placement passes are what the presets spend their time in)
+    _, r["gather_point"] = _nonnegative_fit(rows, ys, tiny)
 
-    # photons, estimates, cache passes, cache look-ups: two cache renders
+    # photons, estimates, cache passes (per pixel and per gather ray), cache look-ups: three
+    # cache renders, two sizes of image and two of gather
     sums = dict.fromkeys(("emit", "emitted", "trace", "rays", "store", "stored", "est",
-                          "estimates", "cache", "pixels", "lookup", "interpolated"), 0.0)
-    for res, (m, n), a in (((320, 240), (4, 12), 0.3), ((640, 480), (4, 12), 0.3)):
+                          "estimates", "lookup", "interpolated"), 0.0)
+    cache_rows, cache_ys, cameras = [], [], []
+    for res, (m, n), a in (((320, 240), (4, 12), 0.3), ((640, 480), (4, 12), 0.3),
+                           ((320, 240), (12, 48), 0.3)):
         stages, s = run(calibration_scene(res), tell, f"irradiance cache {res[0]}x{res[1]}",
                         samples=1, photons=300_000, gather_m=m, gather_n=n, cache_error=a,
                         threads=threads)
@@ -327,9 +327,11 @@ def measure_rates(threads=0, tell=print, repeat=REPEAT) -> est.Rates:
         sums["est"] += stages["radiance_estimates"]["seconds"]
         sums["estimates"] += stages["radiance_estimates"]["estimates"]
         gather = m * n * (1 + s.gather_guided)
-        per_point = gather * r["gather_ray"] + r["gather_point"]
-        sums["cache"] += max(ic["seconds"] - ic["records"] * per_point, 0.0)
-        sums["pixels"] += res[0] * res[1]
+        cache_rows.append((res[0] * res[1], ic["records"] * gather))
+        cache_ys.append(ic["seconds"] - ic["records"] * r["gather_point"])
+        cameras.append(cam)
+    r["cache_pixel"], r["gather_ray"] = _nonnegative_fit(cache_rows, cache_ys, tiny)
+    for cam in cameras:
         sums["lookup"] += max(cam["seconds"] - direct_part(cam) - cam["gather_rays"]
                               * r["gather_ray"] - cam["gather_points"] * r["gather_point"], 0.0)
         sums["interpolated"] += cam["cache_interpolated"]
@@ -337,7 +339,6 @@ def measure_rates(threads=0, tell=print, repeat=REPEAT) -> est.Rates:
     r["photon_ray"] = max(tiny, sums["trace"] / sums["rays"])
     r["photon_store"] = max(tiny, sums["store"] / sums["stored"])
     r["radiance_estimate"] = max(tiny, sums["est"] / sums["estimates"])
-    r["cache_pixel"] = max(tiny, sums["cache"] / sums["pixels"])
     r["cache_lookup"] = max(tiny, sums["lookup"] / max(sums["interpolated"], 1))
 
     # photon-map look-ups at the hits
@@ -348,15 +349,13 @@ def measure_rates(threads=0, tell=print, repeat=REPEAT) -> est.Rates:
                              / max(cam["photon_queries"], 1))
     return est.Rates(seconds={k: float(r[k]) for k in est.RATE_KEYS}, workers=workers,
                      cores=os.cpu_count() or 1, raw={k: raw[k] for k in est.RAW_KEYS},
-                     measured=datetime.datetime.now().isoformat(timespec="seconds"),
-                     probe=round(float(np.mean(probes)), 6))
+                     measured=datetime.datetime.now().isoformat(timespec="seconds"))
 
 
 def print_rates(rates: est.Rates, path=None) -> None:
     where = f" -> {path}" if path else ""
-    probe = "" if rates.probe is None else f", speed probe {rates.probe * 1e3:.0f} ms"
     print(f"Rates of this machine ({rates.workers} workers, {rates.cores} cores, "
-          f"{rates.measured}{probe}){where}")
+          f"{rates.measured}){where}")
     for key, what in est.RATE_KEYS.items():
         print(f"  {key:<18} {rates.seconds[key] * 1e6:10.3f} us   {what}")
     raw = rates.raw
@@ -391,9 +390,8 @@ def check_estimates(resolutions=((160, 120), (640, 480)), scenes=("scene1", "sce
             scene = export_scene(bpy.context.evaluated_depsgraph_get())
             for preset in presets:
                 settings = RenderSettings(preset=preset, threads=threads)
-                e = est.estimate_cost(scene, settings, rates, measure_speed=True)
-                tell(f"{name} {w}x{h} {preset}: predicted {e.seconds:.1f} s (speed factor "
-                     f"{e.speed['factor']:.2f}), rendering")
+                e = est.estimate_cost(scene, settings, rates)
+                tell(f"{name} {w}x{h} {preset}: predicted {e.seconds:.1f} s, rendering")
                 meter = LoadMeter()
                 reports = [render(scene, settings).report for _ in range(max(1, repeat))]
                 during = meter.cores()
@@ -404,7 +402,7 @@ def check_estimates(resolutions=((160, 120), (640, 480)), scenes=("scene1", "sce
                 rows.append({"scene": name, "resolution": [w, h], "preset": preset,
                              "predicted_seconds": e.seconds, "measured_seconds": measured,
                              "measured_runs": [r["total_seconds"] for r in reports],
-                             "speed_factor": e.speed.get("factor"), "load_during": during,
+                             "load_during": during,
                              "ratio": e.seconds / measured if measured > 0 else float("inf"),
                              "predicted_peak_bytes": e.peak_bytes, "stages": stages,
                              "estimate": e.to_report()})
@@ -413,10 +411,10 @@ def check_estimates(resolutions=((160, 120), (640, 480)), scenes=("scene1", "sce
 
 def print_check(rows) -> bool:
     print(f"Estimate against measured pipeline time (PASS: ratio within "
-          f"[1/{PASS_FACTOR:g}, {PASS_FACTOR:g}]); speed: the estimate's speed factor; "
-          "load: other processes' busy cores during the renders")
+          f"[1/{PASS_FACTOR:g}, {PASS_FACTOR:g}]); load: other processes' busy cores during "
+          "the renders")
     print(f"  {'scene':<8}{'size':>9}  {'preset':<8}{'predicted':>11}{'measured':>10}"
-          f"{'ratio':>7}  result  speed  load   per stage (predicted/measured s)")
+          f"{'ratio':>7}  result  load   per stage (predicted/measured s)")
     ok = True
     for row in rows:
         good = 1 / PASS_FACTOR <= row["ratio"] <= PASS_FACTOR
@@ -431,9 +429,8 @@ def print_check(rows) -> bool:
 
 
 def _load(row) -> str:
-    speed, during = row.get("speed_factor"), row.get("load_during")
-    return (f"{'?' if speed is None else f'{speed:.2f}':>5}  "
-            f"{'?' if during is None else f'{during:.1f}':>4}")
+    during = row.get("load_during")
+    return f"{'?' if during is None else f'{during:.1f}':>4}"
 
 
 def _resolutions(text: str):
@@ -468,6 +465,11 @@ def main(argv=None) -> int:
                              f"(default {REPEAT})")
     parser.add_argument("--json", default=None)
     args = parser.parse_args(argv)
+    from .. import imageio
+
+    if args.json and (problem := imageio.output_problem(args.json)):
+        print(f"lanterna: error: --json {args.json}: {problem}", file=sys.stderr)
+        return 2
     try:
         resolutions = _resolutions(args.check_resolutions)
     except ValueError:
@@ -500,8 +502,7 @@ def main(argv=None) -> int:
         ok = print_check(rows)
         out["check"] = rows
     if args.json:
-        with open(args.json, "w") as fh:
-            json.dump(out, fh, indent=2, default=str)
+        imageio.write_json(args.json, out, default=str)
     if not ok:
         print("(a benchmark on a shared machine: a FAIL is a finding to look into, not an error)")
     return 0

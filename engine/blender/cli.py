@@ -561,8 +561,7 @@ def _dry_run(args) -> int:
                                      resolution=resolution, border=border)
         settings = export.export_settings(scene).resolved()
         settings.validate()
-        result = estimate.estimate_cost(lscene, settings, passes=args.passes,
-                                        measure_speed=True)
+        result = estimate.estimate_cost(lscene, settings, passes=args.passes)
     except SceneError as exc:
         raise UsageError(str(exc)) from None
     except estimate.RatesError as exc:
