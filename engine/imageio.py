@@ -13,11 +13,14 @@ Conventions
   clipped to [0, 1], and rounds to 8 bit. No tone mapping, no exposure: 1.0 is white. It is a
   preview; the EXR is the result.
 * :func:`atomic_output` gives a temporary name in the target's directory and renames it over
-  the target only when the block succeeds, so a crash never leaves a half-written file.
+  the target only when the block succeeds, so a crash never leaves a half-written file;
+  :func:`write_json` writes a report that way, and :func:`output_problem` says before any
+  work why a file could not be written there (the benchmarks check their ``--json`` first).
 """
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import tempfile
 
@@ -25,7 +28,7 @@ import numpy as np
 
 __all__ = [
     "write_exr", "read_exr", "read_exr_rgb", "write_png", "linear_to_srgb", "srgb_to_linear",
-    "atomic_output",
+    "atomic_output", "write_json", "output_problem",
 ]
 
 
@@ -63,6 +66,27 @@ def atomic_output(path):
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
+
+
+def write_json(path, data, **dump_options) -> None:
+    """``data`` as indented JSON at ``path``, all or nothing (:func:`atomic_output`);
+    ``dump_options`` go to ``json.dump`` (e.g. ``default=str``, ``allow_nan=False``)."""
+    with atomic_output(path) as tmp, open(tmp, "w") as fh:
+        json.dump(data, fh, indent=2, **dump_options)
+
+
+def output_problem(path) -> str | None:
+    """Why ``path`` cannot be written (its directory is missing or not writable, or it is a
+    directory), or None: asked before long work, so that it does not end in a traceback."""
+    path = os.path.abspath(os.fspath(path))
+    parent = os.path.dirname(path)
+    if os.path.isdir(path):
+        return f"{path} is a directory"
+    if not os.path.isdir(parent):
+        return f"directory {parent} does not exist"
+    if not os.access(parent, os.W_OK | os.X_OK):
+        return f"directory {parent} is not writable"
+    return None
 
 
 def _umask() -> int:

@@ -106,3 +106,16 @@ def test_atomic_output_leaves_nothing_half_written(tmp_path):
         imageio.write_exr(tmp, np.ones((2, 2, 3), np.float32))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out.exr"]
     assert imageio.read_exr_rgb(target).tolist() == np.ones((2, 2, 3)).tolist()
+
+
+def test_write_json_is_all_or_nothing_and_output_problem_names_the_cause(tmp_path):
+    path = tmp_path / "report.json"
+    imageio.write_json(path, {"a": 1})
+    assert path.read_text() == '{\n  "a": 1\n}'
+    with pytest.raises(ValueError):                       # NaN refused: the old file stays
+        imageio.write_json(path, {"a": float("nan")}, allow_nan=False)
+    assert path.read_text() == '{\n  "a": 1\n}'
+    assert sorted(os.listdir(tmp_path)) == ["report.json"]
+    assert imageio.output_problem(path) is None
+    assert "does not exist" in imageio.output_problem(tmp_path / "missing" / "x.json")
+    assert "is a directory" in imageio.output_problem(tmp_path)

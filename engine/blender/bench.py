@@ -34,7 +34,6 @@ Parameters
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -266,6 +265,11 @@ def main(argv=None) -> int:
     except ValueError:
         print("lanterna: error: --resolution must look like 640x480", file=sys.stderr)
         return 2
+    from .. import imageio
+
+    if args.json and (problem := imageio.output_problem(args.json)):
+        print(f"lanterna: error: --json {args.json}: {problem}", file=sys.stderr)
+        return 2
     out = bench_scene1((w, h), args.samples, args.threads, max(1, args.repeat))
     workers = out["workers"]
     print(f"Scene 1 at {w}x{h}, {args.samples} spp, {out['triangles']} triangles, {workers} workers")
@@ -289,8 +293,7 @@ def main(argv=None) -> int:
         out["photons"] = bench_photons(args.photons, (w, h), args.threads)
         print_photons(out["photons"])
     if args.json:
-        with open(args.json, "w") as fh:
-            json.dump(out, fh, indent=2)
+        imageio.write_json(args.json, out)
     return 0
 
 

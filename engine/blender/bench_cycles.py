@@ -606,10 +606,10 @@ def run(args) -> tuple[dict, int]:
         import OpenEXR  # noqa: F401
     except ImportError as exc:
         raise BenchError(f"needs bpy and OpenEXR: {exc}") from None
-    if args.json:
-        parent = os.path.dirname(os.path.abspath(args.json))
-        if not os.path.isdir(parent):
-            raise BenchError(f"--json {args.json}: directory {parent} does not exist")
+    from .. import imageio
+
+    if args.json and (problem := imageio.output_problem(args.json)):
+        raise BenchError(f"--json {args.json}: {problem}")
     cycles = cycles_functions()
     results = {"resolution": list(args.resolution), "compare_at": list(args.compare_at),
                "downsample_factor": args.factor, "cycles_samples": args.cycles_samples,
@@ -660,8 +660,7 @@ def run(args) -> tuple[dict, int]:
                 status = 2
             print_scene(out)
     if args.json:
-        with open(args.json, "w") as fh:
-            json.dump(results, fh, indent=2)
+        imageio.write_json(args.json, results)
         print(f"\nwrote {args.json}")
     return results, status
 

@@ -815,8 +815,7 @@ def write_csv(out: dict, path: str) -> None:
 def write_json(data: dict, path: str) -> None:
     from .. import imageio
 
-    with imageio.atomic_output(path) as tmp, open(tmp, "w") as fh:
-        json.dump(_plain(data), fh, indent=2, allow_nan=False)
+    imageio.write_json(path, _plain(data), allow_nan=False)
 
 
 def _plain(obj):
