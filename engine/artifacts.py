@@ -24,9 +24,9 @@ What it computes
         * the settings part: sha256 over the JSON of the resolved (preset applied) settings
           that change the maps, ``MAP_SETTINGS``: mode, bounces, seed, photons, photon_k,
           photon_radius, indirect, gather_m, gather_n, gather_guided, cache_error,
-          shadow_photons and force (forced stages add maps). Samples, light samples, threads,
-          filter width, photon filter, look-ups, cache gradients and the mirror depth only
-          act when the camera stage uses the maps, so they are left out.
+          cache_refine, shadow_photons and force (forced stages add maps). Samples, light
+          samples, threads, filter width, photon filter, look-ups, cache gradients and the
+          mirror depth only act when the camera stage uses the maps, so they are left out.
         The fingerprint is sha256("lanterna-fingerprint-v1|<scene part>|<settings part>").
         The scene is validated first (``Scene.validate`` is idempotent: it drops untraceable
         triangles, as the pipeline does), so a scene hashes alike before and after a render.
@@ -78,8 +78,8 @@ FORMAT_VERSION = 1
 
 #: The resolved ``RenderSettings`` that change the maps (see the module docstring).
 MAP_SETTINGS = ("mode", "bounces", "seed", "photons", "photon_k", "photon_radius", "indirect",
-                "gather_m", "gather_n", "gather_guided", "cache_error", "shadow_photons",
-                "force")
+                "gather_m", "gather_n", "gather_guided", "cache_error", "cache_refine",
+                "shadow_photons", "force")
 
 _FINGERPRINT_TAG = "lanterna-fingerprint-v1"
 _MAPS = (("photons", "photon_map", PhotonMap), ("shadow_photons", "shadow_map", ShadowPhotonMap),

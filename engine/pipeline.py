@@ -58,6 +58,9 @@ Settings (``RenderSettings``)
     gather_m, gather_n     8, 32     final gather strata in theta and phi (M x N rays)
     cache_error            0.2       irradiance cache error a: records serve where w > 1/a
     cache_gradients        True      interpolate with the records' gradients (Eq. 10.5)
+    cache_refine           True      records that a neighbour's gather contradicts reach
+                                     less far (``irradiance_cache.consistent_radii``), so
+                                     indirect shadows get records of their own
     gather_guided          1.0       extra gather rays, as a multiple of M x N, steered by the
                                      nearby photons' directions (Jensen 1995); 0 = off
     shadow_photons         True      lit / penumbra / umbra classes from shadow photons
@@ -134,6 +137,7 @@ class RenderSettings:
     gather_n: int = 32
     cache_error: float = 0.2
     cache_gradients: bool = True
+    cache_refine: bool = True
     gather_guided: float = 1.0
     shadow_photons: bool = True
     force: str = ""
@@ -258,9 +262,17 @@ def _cache_prepass(scene, accel, arrays, gather: _FinalGather, settings, pool, t
     in batches by the final gather. R_i (harmonic mean distance) is clamped to
     [R_MIN_PIXELS, R_MAX_PIXELS] pixel footprints divided by a, so a record reaches between
     1.5 and 64 pixels: corners cannot drive R_i to 0, open walls cannot spread one record
-    over the image."""
-    from .irradiance_cache import (IrradianceCache, clamp_radius, frames_from_normals,
-                                   irradiance_and_gradients, limit_translational_gradient)
+    over the image. After each pass (``cache_refine``) every record is checked against the
+    gathers of its neighbours (``consistent_radii``): records whose extrapolation a neighbour
+    contradicts reach less far, so the next pass puts records between them, and after the
+    last pass the samples no record covers are gathered where they are. Measured on the seed's
+    Scene 2 (160 x 120, ``final``, two seeds) against a gather at every pixel: the knot's
+    indirect shadow on the floor came out 17 % bright and the worst 4 x 4 block +4.3 % with
+    Ward's weight alone, +1.3 % and 0.8 % with the check, for 4,520 records instead of 2,625
+    and 13.9 s instead of 10.3 s."""
+    from .irradiance_cache import (IrradianceCache, clamp_radius, consistent_radii,
+                                   frames_from_normals, irradiance_and_gradients,
+                                   limit_translational_gradient)
 
     # Over the full frame, whatever the render border: a tile of a still gets the records the
     # whole frame would (so tiles reassemble into the full render, pixel for pixel).
@@ -282,6 +294,7 @@ def _cache_prepass(scene, accel, arrays, gather: _FinalGather, settings, pool, t
     cache = IrradianceCache()
     row, col = np.divmod(pixel, width)
     stats = {"passes": [], "records": 0}
+    record_point, record_variance = [], []       # per record: its pixel's hit, its noise
     chunk = 256
     for pass_index, stride in enumerate(CACHE_STRIDES):
         if cancelled is not None and cancelled():
@@ -307,12 +320,22 @@ def _cache_prepass(scene, accel, arrays, gather: _FinalGather, settings, pool, t
                 radius = clamp_radius(g.radius, R_MIN_PIXELS * footprint[part] / a,
                                       R_MAX_PIXELS * footprint[part] / a)
                 trans = limit_translational_gradient(g.trans_grad, g.irradiance, g.radius, radius)
-                return part, g.irradiance, radius, g.rot_grad, trans
+                return part, g.irradiance, radius, g.rot_grad, trans, g.variance
 
-            for part, e, radius, rot, trans in pool.map(record, parts, range(len(parts))):
+            for part, e, radius, rot, trans, var in pool.map(record, parts, range(len(parts))):
                 cache.add(x[part], ns[part], e, radius, rot, trans)
+                record_point.append(part)
+                record_variance.append(var)
                 made += len(part)
-        stats["passes"].append({"stride": stride, "new_records": made})
+        shrunk = 0
+        if made and settings.cache_refine:
+            # Records that disagree with a neighbour's gather reach less far; the finer passes
+            # then fill the gap (an indirect shadow gets records of its own).
+            points = np.concatenate(record_point)
+            bound = consistent_radii(cache, a, np.concatenate(record_variance),
+                                     r_min=R_MIN_PIXELS * footprint[points] / a)
+            shrunk = cache.limit_radius(bound)
+        stats["passes"].append({"stride": stride, "new_records": made, "shrunk": shrunk})
         tell((pass_index + 1) / len(CACHE_STRIDES),
              f"Irradiance cache: pass {pass_index + 1}/{len(CACHE_STRIDES)}, {len(cache):,} records")
     stats["records"] = len(cache)

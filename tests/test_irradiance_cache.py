@@ -19,7 +19,8 @@ import pytest
 from hypothesis import given, settings, strategies as st
 from scipy.special import k1
 
-from lanterna.engine.irradiance_cache import (IrradianceCache, clamp_radius, directions_to_world,
+from lanterna.engine.irradiance_cache import (IrradianceCache, clamp_radius, consistent_radii,
+                                              directions_to_world,
                                               frames_from_normals, gather_directions,
                                               irradiance_and_gradients)
 
@@ -590,3 +591,100 @@ def test_speed_report(capsys):
         print(f"\n[irradiance cache] {len(c)} records: "
               + ", ".join(f"{k} {v / 1e3:.0f}k points/s" for k, v in speeds.items()))
     assert speeds["grid"] > 20_000
+
+
+# -- The records' own noise and the neighbour check (consistent_radii) --------------------------
+
+def test_stratified_variance_is_the_noise_of_the_gather():
+    """The checkerboard estimate of a gather's noise is unbiased: radiance i.i.d. per stratum
+    with variance s^2 per channel gives var(E channel sum) = pi^2 3 s^2 / (M N). Over 20,000
+    gathers the mean estimate has relative SE about 1 % (each estimate is a one-degree
+    chi-square, relative SD sqrt(2)); bound 5 %. Constant radiance has no noise: exactly 0."""
+    m, n, s = 6, 24, 0.3
+    rng = np.random.default_rng(11)
+    rad = 1.0 + s * rng.standard_normal((20_000, m, n, 3))
+    frames = frames_from_normals(np.tile([0.0, 0.0, 1.0], (20_000, 1)))
+    g = irradiance_and_gradients(rad, np.ones((20_000, m, n)), m, n, frames)
+    expected = np.pi ** 2 * 3 * s ** 2 / (m * n)
+    assert g.variance.shape == (20_000,)
+    assert abs(g.variance.mean() / expected - 1) < 0.05, g.variance.mean() / expected
+    actual = g.irradiance.sum(axis=1).var()          # the noise the estimate stands for
+    assert abs(actual / expected - 1) < 0.05
+    four = frames_from_normals(np.tile([0.0, 0.0, 1.0], (4, 1)))
+    flat = irradiance_and_gradients(np.ones((4, m, n, 3)), np.ones((4, m, n)), m, n, four)
+    assert np.all(flat.variance == 0)
+
+
+def _records_on_a_line(values, spacing=0.1, radius=1.0, gradient=0.0):
+    """Records on the x axis of the plane z = 0, facing +z, E = values (grey), translational
+    gradient ``gradient`` along x per record."""
+    k = len(values)
+    x = np.column_stack([np.arange(k) * spacing, np.zeros(k), np.zeros(k)])
+    e = np.repeat(np.asarray(values, np.float64)[:, None], 3, axis=1)
+    grad = np.zeros((k, 3, 3))
+    grad[:, :, 0] = np.asarray(gradient, np.float64).reshape(-1, 1) if np.ndim(gradient) else gradient
+    c = IrradianceCache()
+    c.add(x, np.tile([0.0, 0.0, 1.0], (k, 1)), e, np.full(k, radius), trans_grad=grad)
+    return c, x
+
+
+def test_consistent_radii_leave_a_linear_field_alone():
+    """Records that predict each other exactly (a linear field with its gradient) are never
+    bounded, with or without a noise allowance."""
+    values = 1.0 + 0.5 * np.arange(20) * 0.1
+    c, _ = _records_on_a_line(values, gradient=0.5)
+    for z in (0.0, 4.0):
+        bound = consistent_radii(c, 0.3, np.zeros(len(c)), z=z)
+        assert np.all(np.isinf(bound))
+
+
+def test_consistent_radii_stop_records_reaching_across_a_step():
+    """A step from E = 1 to E = 0.2 between x = 0.9 and 1.0 (records 0.1 apart, R = 1, a =
+    0.3: each reaches 0.3 and is checked against the records within 0.6). Before the check a
+    point between the last bright and the first dark record is a blend of both sides. Every
+    pair across the step disagrees by 0.8 (channel sums 2.4 against a tolerance of 0.3 x 1.8),
+    so both records of a pair d apart get R <= d (0.54 / 2.4) / 0.3 = 0.75 d: the records
+    within 0.5 of the step are bounded (0.075 at the step), the others keep R = 1, and after
+    the bounds a point next to a record gets its own side's value within 1e-9."""
+    values = np.where(np.arange(20) < 10, 1.0, 0.2)
+    c, x = _records_on_a_line(values)
+    probe = np.array([[0.93, 0.0, 0.0], [0.97, 0.0, 0.0]])
+    up = np.tile([0.0, 0.0, 1.0], (2, 1))
+    before, covered, _, _ = c.interpolate(probe, up, 0.3, count_usage=False)
+    assert covered.all() and np.all(np.abs(before[:, 0] - 0.6) < 0.2)   # a blend of both sides
+
+    bound = consistent_radii(c, 0.3, np.zeros(len(c)))
+    near = np.abs(x[:, 0] - 0.95) < 0.5
+    assert np.all(np.isfinite(bound[near])) and np.all(np.isinf(bound[~near]))
+    np.testing.assert_allclose(bound[[9, 10]], 0.075)
+    np.testing.assert_allclose(bound[[5, 14]], 0.375)
+    assert c.limit_radius(bound) == near.sum()
+    assert np.all(c.radius[~near] == 1.0)
+    side = np.array([[0.89, 0.0, 0.0], [1.01, 0.0, 0.0], [0.3, 0.0, 0.0], [1.7, 0.0, 0.0]])
+    after, covered, _, _ = c.interpolate(side, np.tile([0.0, 0.0, 1.0], (4, 1)), 0.3,
+                                         count_usage=False)
+    assert covered.all()
+    np.testing.assert_allclose(after[:, 0], [1.0, 0.2, 1.0, 0.2], atol=1e-9)
+
+
+def test_consistent_radii_ignore_noise_within_the_allowance():
+    """A constant field seen through noise of relative SD 5 % (and variances that say so):
+    z = 4 bounds no record; z = 0 bounds many (the check is noise-aware, not blind)."""
+    rng = np.random.default_rng(5)
+    values = 1.0 + 0.05 * rng.standard_normal(200)
+    c, _ = _records_on_a_line(values, spacing=0.02)
+    variance = (0.05 * values * 3) ** 2                    # channel sum of three equal channels
+    assert np.all(np.isinf(consistent_radii(c, 0.1, variance, z=4.0)))
+    assert np.isfinite(consistent_radii(c, 0.1, variance, z=0.0)).sum() > 20
+
+
+def test_limit_radius_only_shrinks_and_rebuilds_the_index():
+    c, x = _records_on_a_line([1.0, 1.0, 1.0], spacing=1.0, radius=2.0)
+    q, up = np.array([[0.5, 0.0, 0.0]]), np.array([[0.0, 0.0, 1.0]])
+    assert c.interpolate(q, up, 0.3, count_usage=False)[1].all()
+    assert c.limit_radius([5.0, np.inf, 2.0]) == 0                # nothing larger, nothing equal
+    assert c.limit_radius([0.5, 0.5, np.inf]) == 2
+    np.testing.assert_array_equal(c.radius, [0.5, 0.5, 2.0])
+    assert not c.interpolate(q, up, 0.3, count_usage=False)[1].any()   # reach 0.15 now
+    with pytest.raises(ValueError):
+        c.limit_radius([0.0, 1.0, 1.0])

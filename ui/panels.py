@@ -273,6 +273,7 @@ class LANTERNA_RENDER_PT_irradiance_cache(LanternaRenderPanel, bpy.types.Panel):
         layout.active = _indirect_used(settings) and effective(settings, "indirect") == 'CACHE'
         _prop(layout, settings, "cache_error", preset_overrides(settings), text="Error (a)")
         layout.prop(settings, "cache_gradients")
+        layout.prop(settings, "cache_refine")
 
 
 # -- Render: shadow photons -------------------------------------------------------------------

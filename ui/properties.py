@@ -149,6 +149,14 @@ class LanternaSceneSettings(bpy.types.PropertyGroup):
                      "weighted average of the records"),
         default=True,
     )
+    cache_refine: BoolProperty(
+        name="Refine at Contrasts",
+        description=("Irradiance cache: records whose extrapolation a neighbouring record's "
+                     "gather contradicts reach less far, so indirect shadows and sharp "
+                     "changes get records of their own; off: records placed by Ward's "
+                     "geometric weight only"),
+        default=True,
+    )
     use_irradiance_cache: BoolProperty(
         name="Irradiance Cache",
         description=("Interpolate the final gather between cached records (Indirect = "

@@ -9,7 +9,8 @@ Usage
     ``[--bounces N] [--seed N] [--threads N] [--mode full|photon-map] [--photons N]``
     ``[--photon-k N] [--photon-radius R] [--photon-filter none|cone] [--photon-lookups N]``
     ``[--preset custom|preview|final] [--indirect cache|gather|photon-map] [--gather MxN]``
-    ``[--gather-guided X] [--cache-error A] [--no-shadow-photons] [--dry-run]``
+    ``[--gather-guided X] [--cache-error A] [--no-cache-refine] [--no-shadow-photons]``
+    ``[--dry-run]``
 
     Renders the active scene of ``SCENE.blend`` with Lanterna (whatever engine the file names),
     or the seed's Scene 1 (``--scene`` picks another) when no file is given. Flags override
@@ -227,6 +228,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="irradiance cache error a (default 0.2)")
     render.add_argument("--no-shadow-photons", action="store_true",
                         help="trace every shadow ray (no lit/umbra classification)")
+    render.add_argument("--no-cache-refine", action="store_true",
+                        help="place cache records by Ward's geometric weight only (no check "
+                             "against the neighbours' gathers)")
     render.add_argument("--photon-lookups", type=_int_at_least(0, 65536), metavar="N",
                         help="camera samples per pixel that ask the photon map (0 = automatic: "
                              "about 300k look-ups per image)")
@@ -330,6 +334,8 @@ def _apply_overrides(scene, args) -> None:
         settings.cache_error = args.cache_error
     if args.gather_guided is not None:
         settings.gather_guided = min(args.gather_guided, 64.0)
+    if args.no_cache_refine:
+        settings.cache_refine = False
     if args.no_shadow_photons:
         settings.shadow_photons = False
     preset = args.preset or str(settings.preset).lower()
