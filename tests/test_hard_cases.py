@@ -111,10 +111,13 @@ def test_broken_triangles_are_skipped_counted_and_change_nothing():
         assert dirty_scene.stats["skipped_triangles"] == 7
         assert len(dirty_scene.triangles) == 12 + 4 + 2
         assert np.isfinite(dirty.image).all()
-        # Same seed, same hits: only the summation order of the BVH's other primitives can
-        # differ. Measured: bit-identical (photon map), 2.4e-7 of the peak (cache).
+        # Same seed, same hits, except where a ray's offset follows the scene's size (1 % of
+        # its extent near the origin), which the slivers outside change: 68-72 of 150k
+        # photons bounce from a point up to 3e-5 m away. Measured 1.8e-5 of the peak (photon
+        # map; the photons now leave a bounce from its hit pulled back along the incoming
+        # ray) and 8.7e-7 (cache); a seed changes a pixel by several per cent. Bound: 1e-4.
         np.testing.assert_allclose(dirty.image, clean.image, rtol=0,
-                                   atol=1e-5 * clean.image.max())
+                                   atol=1e-4 * clean.image.max())
 
 
 def test_sliver_emitters_match_lamberts_formula():
@@ -184,9 +187,17 @@ def test_scene1_scaled_up_and_down_by_1e4_gives_the_same_picture(indirect):
     """The issue's bound: the same picture within 2 %, compared in 8 x 8-pixel block means
     (blocks above 5 % of the peak relatively, all blocks against 2 % of the peak). Same seed,
     so the random numbers are the same and only round-off and the offsets (relative to the
-    coordinates) differ: measured 0.09 % (cache) and 0.02 % (photon map) at worst, where two
-    seeds differ by 2 % in a typical block (SD over seeds 2-4) and 9 % in the worst."""
-    settings = RenderSettings(seed=1, photons=40_000, indirect=indirect, **QUICK)
+    coordinates) differ: measured 0.02 % (photon map, QUICK) at worst, where two seeds differ
+    by 2 % in a typical block (SD over seeds 2-4) and 9 % in the worst.
+    The cache's records reach as far as their neighbours' gathers allow (``cache_refine``),
+    so its placement depends on the records' values, which round-off moves by ~4e-4 (a gather
+    ray that grazes an edge): with QUICK's 4 x 8 gather one decision flipped and moved a
+    block by 5.7 % (seeds differ by up to 9 % there). The cache case therefore gathers 8 x 32
+    rays with 100k photons, where seeds differ by up to 3.4 % and the scaled pictures
+    agreed within 0.2 % (measured)."""
+    extra = dict(gather_m=8, gather_n=32, photons=100_000) if indirect == "cache" else {}
+    settings = RenderSettings(**{**dict(seed=1, photons=40_000, indirect=indirect, **QUICK),
+                                 **extra})
     reference = render(_scene1(1.0), settings).image
     ref_blocks = _block_means(reference, 8)
     lit = ref_blocks > 0.05 * ref_blocks.max()
