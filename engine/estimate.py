@@ -50,18 +50,21 @@ the cache is placed over it, so a tile (render border) renders as its part of th
                            2.69 measured, 2.82 predicted; Scene 2 4.39 measured, 3.87
                            predicted (its lamp's light bounces about a white tube).
     radiance estimates     min(400k, 0.25 stored) (``engine/gather.py``, exact given stored)
-    cache records          tan(fov/2) exp(c0 + c1 ln F + c2 ln a + c3 ln F ln a), clipped to
+    cache records          exp(c0 + c1 ln F + c2 ln a + c3 ln F ln a), clipped to
                            [ceil(w/32) ceil(h/32), F] (w x h the frame): a least-squares fit
-                           to the records the placement passes made on the seed's two scenes
-                           (160x120 and 640x480, a = 0.1 and 0.3) and two other rooms at
-                           fields of view of 40, 60 and 90 degrees (160x120, a = 0.2): within
-                           a factor 1.8 of all 14
-                           (seed scenes: 0.77-1.16). A wider view sees more corners and edges
-                           per pixel, where records of the minimum reach (1.5 pixels) crowd.
+                           (``tools/fit_cache_counts.py``) to the records the placement passes
+                           made, with the neighbour check, on the seed's two scenes (160x120
+                           and 640x480, ``preview`` and ``final``): 0.71-1.41 of the fit. The
+                           check makes the count depend on the light (Scene 2's indirect
+                           shadows double it at ``final``, Scene 1 gains 4 %) and the view
+                           more so (two rooms at 40-90 degrees lay at 0.1-2.3 of it): a guide,
+                           not a forecast. (An earlier fit scaled with tan(fov/2), as wider
+                           views of the rooms saw more corners per pixel; with the check the
+                           narrower Scene 2 has the most records, and the factor is gone.)
     gathered look-ups      cache: look-ups x f, f = exp(u0) F^u1 a^u2 (the share no record
-                           covers: across edges from the pixel centres the passes saw), fitted
-                           to the seed scenes (which scatter by a factor 1.7 about it; two
-                           other rooms lay within a factor 2); ``gather``: every look-up.
+                           covers: across edges from the pixel centres the passes saw, and
+                           where the neighbour check shrank the records), fitted to the same
+                           renders (0.41-3.0 of the fit); ``gather``: every look-up.
     gather rays per point  G = M N (1 + ``gather_guided``)
     shadow photons         ``auto_shadow_photon_count`` (100k-1M, from area and extent)
     =====================  =================================================================
@@ -189,9 +192,9 @@ PIXEL_BUFFER_BYTES = 12
 SAMPLE_WORK_BYTES = 640
 K_OFFSET = 10                        # estimate cost ~ (k + K_OFFSET) / (50 + K_OFFSET)
 
-# Fits (module docstring): cache records (seed scenes and two rooms), uncovered look-ups.
-RECORD_FIT = (2.50988, 0.21102, -0.43463, -0.10136)   # x tan(half field of view)
-UNCOVERED_FIT = (-1.3806, -0.75355, -1.71473)
+# Fits (module docstring, tools/fit_cache_counts.py): cache records, uncovered look-ups.
+RECORD_FIT = (2.16518, 0.28815, -0.64181, -0.07100)
+UNCOVERED_FIT = (-1.34295, -0.46836, -0.46764)
 
 GIB = float(1 << 30)
 
@@ -662,12 +665,12 @@ def format_bytes(b: float) -> str:
     return f"{b / GIB:.1f} GiB"
 
 
-def record_count(pixels: int, a: float, window=None, tan_half: float = 1.0) -> float:
-    """Predicted irradiance-cache records for ``pixels`` window pixels, error ``a`` and a
-    camera of horizontal field of view 2 atan(``tan_half``) (module docstring)."""
+def record_count(pixels: int, a: float, window=None) -> float:
+    """Predicted irradiance-cache records for ``pixels`` frame pixels and error ``a`` (module
+    docstring)."""
     c0, c1, c2, c3 = RECORD_FIT
     lp, la = math.log(max(pixels, 1)), math.log(max(a, 1e-3))
-    records = math.exp(c0 + c1 * lp + c2 * la + c3 * lp * la) * max(tan_half, 1e-3)
+    records = math.exp(c0 + c1 * lp + c2 * la + c3 * lp * la)
     w, h = window if window is not None else (math.sqrt(pixels),) * 2
     low = math.ceil(w / 32) * math.ceil(h / 32)
     return float(min(max(records, low), pixels))
@@ -785,7 +788,7 @@ def estimate_from_facts(facts: SceneFacts, settings, rates: Rates | None = None,
                 estimates=n_est)
         if plan["irradiance_cache"]:
             # Placed over the full frame whatever the window (a tile agrees with the frame).
-            records = record_count(F, s.cache_error, facts.frame, facts.tan_half)
+            records = record_count(F, s.cache_error, facts.frame)
             if reused:
                 add("irradiance_cache", 0.0, records=records, reused=1)
             else:
