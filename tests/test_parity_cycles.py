@@ -89,8 +89,7 @@ def block_means(image, grid):
     return image.reshape(gy, h // gy, gx, w // gx, c).astype(np.float64).mean(axis=(1, 3))
 
 
-def compare_regions(lan, ref, ref_se, lan_se, shape, rel_tol=REL_TOL, abs_tol=ABS_TOL,
-                    ref_sigmas=0.0):
+def compare_regions(lan, ref, ref_se, lan_se, shape, rel_tol=REL_TOL, abs_tol=ABS_TOL):
     """Apply the rule of the module docstring. Returns (failures, table): a list of one-line
     messages for the blocks that break it and a text grid of Lanterna / Cycles ratios."""
     gy, gx, _ = ref.shape
@@ -112,9 +111,7 @@ def compare_regions(lan, ref, ref_se, lan_se, shape, rel_tol=REL_TOL, abs_tol=AB
                 noise = f"SE Cycles {ref_se[i, j, c]:.2g}, Lanterna {lan_se[i, j, c]:.2g}"
                 if r >= BRIGHT_FRACTION * peak[c]:
                     rel = l / r - 1.0
-                    # ref_sigmas > 0 widens the bound by that many of the reference's own
-                    # standard errors (for a reference that could not be made quiet enough).
-                    if not abs(rel) <= rel_tol + ref_sigmas * ref_se[i, j, c] / r:
+                    if not abs(rel) <= rel_tol:
                         failures.append(f"{where}: Lanterna {l:.5g} vs Cycles {r:.5g} "
                                         f"({rel:+.2%}, limit ±{rel_tol:.0%}; {noise})")
                 else:

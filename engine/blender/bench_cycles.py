@@ -28,9 +28,10 @@ What it computes (``lanterna bench --vs-cycles`` or
        per process, not timed, loads the kernels first.
     3. The reference: at 160 x 120, the stored ``tests/data/cycles_gi/<scene>.npz`` (Cycles,
        same settings, 4 seeds x 768 spp). At any other resolution Cycles renders one at
-       ``--reference-samples`` (4096) split over 2 seeds, cached as
-       ``out/bench_cache/<scene>_<W>x<H>_<spp>.npz`` (relative to the working directory) and
-       reused when present.
+       ``--reference-samples`` (4096) split over 2 seeds, each seed's render cached as
+       ``out/bench_cache/<scene>_<W>x<H>_seed<seed>_<spp>.npz`` (relative to the working
+       directory; the format of ``make_cycles_refs.py --reuse-dir``) and reused when
+       present.
 
 Errors (against the reference ``ref``, over all pixels and the three channels)
     relative RMSE = sqrt(mean((img - ref)^2)) / mean(ref).
@@ -343,36 +344,47 @@ def stored_reference(name: str, resolution) -> dict | None:
             "seconds": None}
 
 
-def rendered_reference(name, bscene, resolution, samples, configure, render_exr, tmpdir) -> dict:
+def seed_render_path(name: str, resolution, seed: int, samples: int) -> Path:
+    """Where one seed's Cycles render is cached: ``<scene>_<W>x<H>_seed<seed>_<spp>.npz`` with
+    ``image`` (float32, row 0 = top) and ``seconds``, the format ``tests/data/
+    make_cycles_refs.py --reuse-dir`` reads, so the stored Scene 2 reference and this benchmark
+    share the renders."""
     w, h = resolution
-    path = CACHE_DIR / f"{name}_{w}x{h}_{samples}.npz"
-    if path.is_file():
-        data = np.load(path)
-        return {"image": data["image"].astype(np.float64), "variance": float(data["variance"]),
-                "source": f"cached {path}: Cycles {len(REFERENCE_SEEDS)} seeds x "
-                          f"{samples // len(REFERENCE_SEEDS)} spp", "samples": samples,
-                "seconds": None}
+    return CACHE_DIR / f"{name}_{w}x{h}_seed{seed}_{samples}.npz"
+
+
+def rendered_reference(name, bscene, resolution, samples, configure, render_exr, tmpdir) -> dict:
+    """The mean of ``REFERENCE_SEEDS`` Cycles renders of ``samples`` / 2 spp each, every one
+    rendered once and cached (``seed_render_path``), and the per-pixel variance of the mean
+    from the seeds' difference."""
     per_seed = max(1, samples // len(REFERENCE_SEEDS))
-    renders, seconds = [], 0.0
+    renders, seconds, fresh = [], 0.0, False
     for seed in REFERENCE_SEEDS:
-        _log(f"  reference: Cycles {per_seed} spp, seed {seed} ...")
-        configure(bscene, per_seed, seed, gi=True)
-        with _blender_output_to(os.path.join(tmpdir, "blender.log")):
-            img, dt = render_exr(bscene, os.path.join(tmpdir, f"ref_{name}_{seed}.exr"))
+        path = seed_render_path(name, resolution, seed, per_seed)
+        if path.is_file():
+            with np.load(path) as data:
+                img, dt = data["image"].astype(np.float64), float(data["seconds"])
+        else:
+            _log(f"  reference: Cycles {per_seed} spp, seed {seed} ...")
+            configure(bscene, per_seed, seed, gi=True)
+            with _blender_output_to(os.path.join(tmpdir, "blender.log")):
+                img, dt = render_exr(bscene, os.path.join(tmpdir, f"ref_{name}_{seed}.exr"))
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_name(path.stem + ".tmp.npz")
+            np.savez_compressed(tmp, image=img.astype(np.float32), seconds=dt)
+            os.replace(tmp, path)
+            fresh = True
         renders.append(img)
         seconds += dt
     a, b = renders
     image = (a + b) / 2
     ref_var = float(np.mean((a - b) ** 2) / 4)     # variance of the 2-seed mean, per pixel
-    CACHE_DIR.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.stem + ".tmp.npz")
-    np.savez_compressed(tmp, image=image.astype(np.float32), variance=ref_var,
-                        seeds=np.array(REFERENCE_SEEDS), samples_per_seed=per_seed,
-                        seconds=seconds)
-    os.replace(tmp, path)
+    how = "rendered now, cached" if fresh else "cached"
     return {"image": image, "variance": ref_var,
-            "source": f"rendered now, cached as {path}: Cycles {len(REFERENCE_SEEDS)} seeds x "
-                      f"{per_seed} spp", "samples": samples, "seconds": seconds}
+            "source": f"{how} as {CACHE_DIR}/{name}_{resolution[0]}x{resolution[1]}_seed"
+                      f"<{'|'.join(map(str, REFERENCE_SEEDS))}>_{per_seed}.npz: Cycles "
+                      f"{len(REFERENCE_SEEDS)} seeds x {per_seed} spp", "samples": samples,
+            "seconds": seconds}
 
 
 # -- One scene -----------------------------------------------------------------------------------

@@ -91,7 +91,7 @@ GI_SCENES = ("scene1", "cornell", "scene2")
 GI_SAMPLES = {       # per seed; every bright block's relative SE comes out < 0.3 %
     "scene1": 768,
     "cornell": 2560,
-    "scene2": 1024,    # at 4x the resolution (GI_SUPERSAMPLE): see below and the README
+    "scene2": 2048,    # at 4x the resolution (GI_SUPERSAMPLE): see below and the README
 }
 GI_RESOLUTION = {"scene1": (160, 120), "scene2": (160, 120)}   # others: the builder's own
 # Scene 2 is lit almost only by bounced light and Cycles converges slowly on it: it is
