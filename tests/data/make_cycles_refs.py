@@ -96,7 +96,7 @@ GI_SAMPLES = {       # per seed; every bright block's relative SE comes out < 0.
 GI_RESOLUTION = {"scene1": (160, 120), "scene2": (160, 120)}   # others: the builder's own
 # Scene 2 is lit almost only by bounced light and Cycles converges slowly on it: it is
 # rendered at 4 x 4 times the pixels (640 x 480) and box-averaged down to 160 x 120, so each
-# stored pixel holds 16 x 1024 samples per seed. Two seeds (the benchmark's 640 x 480
+# stored pixel holds 16 x 2048 samples per seed. Two seeds (the benchmark's 640 x 480
 # reference seeds, so `lanterna bench --vs-cycles --resolution 640x480` and this reference
 # share the renders: ``--reuse-dir``); with 2 seeds the blocks' SE comes from the per-pixel
 # variance (``region_se_pixels``), not from the spread of 2 block means.
