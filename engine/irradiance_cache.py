@@ -18,6 +18,11 @@ What it computes
             E(x, n) = sum w_i [E_i + (n_i x n) . grad_r E_i + (x - x_i) . grad_t E_i] / sum w_i.
         A per-record counter of the interpolated points each record served.
     ``clamp_radius(R, r_min, r_max)``  R_i between bounds (corners otherwise drive R_i to 0).
+    ``consistent_radii(cache, a, variance)``  bounds on R_i from the neighbours' gathers: a
+        record whose extrapolation (Eq. 10.5) misses a neighbouring record's E by more than
+        a E plus the gathers' noise may not reach that far (indirect shadows, which Ward's
+        geometric weight cannot see); ``GatherGradients.variance`` is each gather's estimate
+        of its own noise, from two interleaved halves of its strata.
 
 Gradients and their signs (derived here, pinned by tests/test_irradiance_cache.py)
     With u(phi) = cos(phi) t + sin(phi) b and omega = sin(theta) u + cos(theta) n:
