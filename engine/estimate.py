@@ -61,10 +61,14 @@ the cache is placed over it, so a tile (render border) renders as its part of th
                            not a forecast. (An earlier fit scaled with tan(fov/2), as wider
                            views of the rooms saw more corners per pixel; with the check the
                            narrower Scene 2 has the most records, and the factor is gone.)
-    gathered look-ups      cache: look-ups x f, f = exp(u0) F^u1 a^u2 (the share no record
-                           covers: across edges from the pixel centres the passes saw, and
-                           where the neighbour check shrank the records), fitted to the same
-                           renders (0.41-3.0 of the fit); ``gather``: every look-up.
+    gathered look-ups      cache: look-ups x f, f = exp(u0) F^u1 a^u2 (the share that needs a
+                           gather in the camera stage: no placed record covers it (across
+                           edges from the pixel centres the passes saw, where the normal
+                           turns fast, where the neighbour check shrank the records) and it
+                           makes a batch-local record or has none near), fitted to the same
+                           renders at the presets' 16 spp (0.50-2.8 of the fit; Scene 2's
+                           knot needs 5x Scene 1's share at 160 x 120); ``gather``: every
+                           look-up.
     gather rays per point  G = M N (1 + ``gather_guided``)
     shadow photons         ``auto_shadow_photon_count`` (100k-1M, from area and extent)
     =====================  =================================================================
@@ -194,7 +198,7 @@ K_OFFSET = 10                        # estimate cost ~ (k + K_OFFSET) / (50 + K_
 
 # Fits (module docstring, tools/fit_cache_counts.py): cache records, uncovered look-ups.
 RECORD_FIT = (2.16518, 0.28815, -0.64181, -0.07100)
-UNCOVERED_FIT = (-1.34295, -0.46836, -0.46764)
+UNCOVERED_FIT = (-6.70111, -0.12343, -0.80216)
 
 GIB = float(1 << 30)
 

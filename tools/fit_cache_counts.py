@@ -3,13 +3,16 @@
 
 What it computes
     Renders the seed's Scene 1 and Scene 2 (``engine/blender/seed_scenes.py``) at 160 x 120 and
-    640 x 480 with the ``preview`` and ``final`` presets (a = 0.3 and 0.1; 1 spp, so that at
-    640 x 480 as at 160 x 120 every camera sample asks the cache), and two closed rooms
+    640 x 480 with the ``preview`` and ``final`` presets (a = 0.3 and 0.1; 16 spp, the presets'
+    samples: the automatic look-up count asks the cache at all 16 samples of a pixel at
+    160 x 120 and at one at 640 x 480, and the camera's batch-local records serve a pixel's
+    uncovered samples from one gather, so the gathered share depends on it), and two closed rooms
     (``tests/test_gather_cache.py``'s box with a point light, and the same box with a plate
     floating over the floor under a spot that lights the ceiling) at fields of view of 40,
     60 and 90 degrees (160 x 120, a = 0.2, gather 8 x 32), and for each the records the
     placement passes made (with the neighbour check, ``cache_refine``) and the share of the
-    cache look-ups no record covered (gathered afresh). Then the least-squares fits
+    cache look-ups that needed a gather in the camera stage (no placed record covered them,
+    and they made a batch-local record or had no local record near: gathered afresh). Then the least-squares fits
         ln(records)              = c0 + c1 ln F + c2 ln a + c3 ln F ln a
         ln(uncovered share)      = u0 + u1 ln F + u2 ln a
     (F the frame's pixels) over the seed scenes' eight renders, and how far each render, the
@@ -91,9 +94,9 @@ def measure():
 
     rows = []
     for label, scene, settings in cases():
-        result = render(scene, RenderSettings(samples=1, seed=1, light_samples=1, **settings))
+        result = render(scene, RenderSettings(samples=16, seed=1, light_samples=1, **settings))
         cam = result.report["stages"]["camera"]
-        lookups = cam["cache_interpolated"] + cam["cache_gathered"]
+        lookups = cam["cache_interpolated"] + cam["cache_local_interpolated"] + cam["cache_gathered"]
         w, h = scene.camera.resolution
         row = {"case": label, "pixels": w * h, "a": settings["cache_error"],
                "records": result.report["stages"]["irradiance_cache"]["records"],
