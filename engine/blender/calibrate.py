@@ -15,9 +15,7 @@ What it computes (``lanterna bench --calibrate`` / ``lanterna bench --check-esti
        photons (light sample and shadow photon rates); final gathers at every pixel with
        6x24 and 12x48 strata at 40x30 and 1x4 at 96x72 (the gather point rate, non-negative
        least squares over rays and points); irradiance-cache renders at 320x240 and 640x480
-       with 6x24 strata and at 320x240 with 12x48 (the presets' gathers; with 4x12 the rate
-       per ray came out 15-30 % above what the seed scenes' placement passes spend), 1 spp,
-       300k photons, a = 0.3 (photon
+       with 4x12 strata and at 320x240 with 12x48, 1 spp, 300k photons, a = 0.3 (photon
        emission, tracing and map build; radiance estimates; the placement passes' cost per
        pixel and per gather ray, non-negative least squares; cache look-ups); and a
        photon-map look-up render.
@@ -314,7 +312,7 @@ def measure_rates(threads=0, tell=print, repeat=REPEAT) -> est.Rates:
     sums = dict.fromkeys(("emit", "emitted", "trace", "rays", "store", "stored", "est",
                           "estimates", "lookup", "interpolated"), 0.0)
     cache_rows, cache_ys, cameras = [], [], []
-    for res, (m, n), a in (((320, 240), (6, 24), 0.3), ((640, 480), (6, 24), 0.3),
+    for res, (m, n), a in (((320, 240), (4, 12), 0.3), ((640, 480), (4, 12), 0.3),
                            ((320, 240), (12, 48), 0.3)):
         stages, s = run(calibration_scene(res), tell, f"irradiance cache {res[0]}x{res[1]}",
                         samples=1, photons=300_000, gather_m=m, gather_n=n, cache_error=a,
