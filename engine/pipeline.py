@@ -261,8 +261,7 @@ class _CachedIndirect:
         rest = np.nonzero(~covered)[0]
         gathered = 0
         if len(rest) and self.local_records:
-            local = _local_cache_records(self, x, ns, ng, rest, e, covered, rng, stats)
-            rest, made = local
+            rest, made = _local_cache_records(self, x, ns, ng, rest, e, covered, rng, stats)
             gathered += made
         if len(rest):
             e[rest] = self.gather.irradiance(x[rest], ns[rest], ng[rest], rng, stats)

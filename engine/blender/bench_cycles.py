@@ -218,10 +218,12 @@ def render_with_noisy_pass(scene, path: str):
     return out, seconds
 
 
-def measure_denoise_seconds(scene, configure, render_exr, tmpdir, name) -> float:
+def measure_denoise_seconds(scene, configure, render_exr, tmpdir, name) -> tuple:
     """OIDN's time at this resolution: a 1-spp render with the denoiser minus one without
     (best of 2 each, after a warm-up); subtracted from a denoised render's time to give the
-    time of the same render without the denoiser."""
+    time of the same render without the denoiser. Returns (that difference, the 1-spp render's
+    time without the denoiser): the least a render of this size takes, so that the
+    subtraction, noisy where both are tiny, never gives a render of no time."""
     times = {False: [], True: []}
     for _ in range(2):
         for den in (False, True):
@@ -231,7 +233,7 @@ def measure_denoise_seconds(scene, configure, render_exr, tmpdir, name) -> float
                     set_denoiser(scene)
                 _img, dt = render_exr(scene, os.path.join(tmpdir, f"{name}_den{int(den)}.exr"))
             times[den].append(dt)
-    return max(min(times[True]) - min(times[False]), 0.0)
+    return max(min(times[True]) - min(times[False]), 0.0), min(times[False])
 
 
 def warm_up_cycles(bscene, configure, render_exr, tmpdir, warm: dict) -> None:
@@ -259,7 +261,8 @@ def cycles_curve(bscene, name, resolution, cycles_samples, cycles, tmpdir, warm:
     w, h = resolution
     warm_up_cycles(bscene, configure, render_exr, tmpdir, warm)
     # The denoiser's own time: a 1-spp render with and without it (warm), the difference.
-    denoise_seconds = measure_denoise_seconds(bscene, configure, render_exr, tmpdir, name)
+    denoise_seconds, least_seconds = measure_denoise_seconds(bscene, configure, render_exr,
+                                                             tmpdir, name)
     rows, images, failures = [], {}, []
     for spp in cycles_samples:
         label = f"Cycles {spp} spp (+ OIDN)"
@@ -283,8 +286,9 @@ def cycles_curve(bscene, name, resolution, cycles_samples, cycles, tmpdir, warm:
         common = {"method": "Cycles", "samples": spp, "seed": CYCLES_SEED,
                   "threads": bscene.render.threads, "render_seconds_with_oidn": dt}
         rows.append({**common, "denoiser": False,
-                     "seconds": max(dt - denoise_seconds, 0.0),
-                     "seconds_note": "the render's time less the denoiser's"})
+                     "seconds": max(dt - denoise_seconds, least_seconds),
+                     "seconds_note": "the render's time less the denoiser's (at least a "
+                                     "1-spp render's)"})
         rows.append({**common, "denoiser": True, "seconds": dt,
                      "denoiser_settings": den_settings,
                      "denoiser_changed_image": bool(np.abs(denoised - noisy).max() > 0)})

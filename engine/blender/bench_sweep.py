@@ -21,7 +21,8 @@ What it computes (``lanterna bench --sweep``)
        settings of the GI references (``tests/data/make_cycles_refs.py``), via
        ``bench_cycles.cycles_curve``: one render with OIDN on gives the noisy and the
        denoised image; the noisy one's time is the render's less OIDN's own time (a 1-spp
-       difference, see ``bench_cycles.measure_denoise_seconds``); ``--repeat N``: the whole
+       difference, see ``bench_cycles.measure_denoise_seconds``), and at least a 1-spp
+       render's; ``--repeat N``: the whole
        curve N times, the fastest time per render kept.
 
 The sweep (``--knobs``, all five by default; ``samples``, the camera samples, can be added)
