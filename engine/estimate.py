@@ -380,7 +380,6 @@ class SceneFacts:
     store_share: float                # area share of surfaces that store photons (P_d > 0)
     specular_share: float             # area share of surfaces with rho_s > 0
     closure: float                    # share of the bounds' faces covered by geometry
-    tan_half: float                   # tan of half the camera's horizontal field of view
     delta_lights: int                 # point, spot, hard sun, collimated area lights
     sampled_lights: list              # (kind, shadow_photons switch, size [m]) per light
     diffuse: list                     # per material: rho_d (RGB)
@@ -552,7 +551,6 @@ def scene_facts(scene) -> SceneFacts:
                       survival=survival, store_share=store, specular_share=spec,
                       first_survival=survival if first is None else first,
                       closure=float(np.clip(closure, 0.0, 1.0)),
-                      tan_half=float(scene.camera.tan_half_x),
                       delta_lights=int(delta), sampled_lights=sampled,
                       diffuse=diffuse.tolist(), specular=specular.tolist(),
                       has_emission=bool(emissive_materials.any()))

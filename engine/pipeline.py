@@ -98,8 +98,9 @@ TARGET_BATCH_SAMPLES = 1 << 16
 # What each camera batch counts (rays, seconds of threads, look-ups); summed over batches.
 BATCH_COUNTERS = ("camera_rays", "shadow_rays", "specular_rays", "trace_seconds", "queries",
                   "query_seconds", "estimate_seconds", "cache_interpolated", "cache_gathered",
-                  "cache_local_records", "cache_local_interpolated", "gather_rays", "gather_points", "shadow_rays_saved", "shadow_lit",
-                  "shadow_umbra", "shadow_penumbra")
+                  "cache_local_records", "cache_local_interpolated", "gather_rays",
+                  "gather_points", "shadow_rays_saved", "shadow_lit", "shadow_umbra",
+                  "shadow_penumbra")
 
 
 MODES = ("full", "photon-map")
@@ -243,16 +244,14 @@ class _CachedIndirect:
     relaxed error instead was measured 2x too bright along a box's contact with the floor.
 
     ``eye`` [m] and ``pixel_angle`` (2 tan(fov_x / 2) / width) give a point's pixel footprint
-    (its distance from the eye times ``pixel_angle``); ``local_records`` False gathers at
-    every uncovered sample."""
+    (its distance from the eye times ``pixel_angle``)."""
 
-    def __init__(self, cache, a, gather: _FinalGather, lookups, use_gradients=True,
-                 eye=None, pixel_angle=0.0, local_records=True):
+    def __init__(self, cache, a, gather: _FinalGather, lookups, use_gradients, eye,
+                 pixel_angle):
         self.cache, self.a, self.gather, self.lookups = cache, a, gather, lookups
         self.use_gradients = use_gradients
-        self.eye = None if eye is None else np.asarray(eye, np.float64)
+        self.eye = np.asarray(eye, np.float64)
         self.pixel_angle = float(pixel_angle)
-        self.local_records = bool(local_records) and self.eye is not None and pixel_angle > 0
 
     def irradiance(self, x, ns, ng, rng, stats):
         e, covered, _w, _count = self.cache.interpolate(x, ns, self.a,
@@ -260,7 +259,7 @@ class _CachedIndirect:
         stats["cache_interpolated"] = stats.get("cache_interpolated", 0) + int(covered.sum())
         rest = np.nonzero(~covered)[0]
         gathered = 0
-        if len(rest) and self.local_records:
+        if len(rest):
             rest, made = _local_cache_records(self, x, ns, ng, rest, e, covered, rng, stats)
             gathered += made
         if len(rest):
@@ -279,23 +278,20 @@ def _local_cache_records(indirect: _CachedIndirect, x, ns, ng, rest, e, covered,
     """``_CachedIndirect``'s batch-local records (its docstring): fills ``e`` at the samples
     ``rest`` they serve (and at their own points), marks those ``covered`` (interpolated from a
     record), and returns (the samples still uncovered, the gathers made)."""
-    from .irradiance_cache import (IrradianceCache, frames_from_normals,
-                                   irradiance_and_gradients, limit_translational_gradient)
+    from .irradiance_cache import IrradianceCache
 
-    gather, a = indirect.gather, indirect.a
+    a = indirect.a
     local = IrradianceCache()
     made = 0
     for step in LOCAL_STEPS:
-        if len(rest) < 2:
+        if len(rest) < 2:                     # one sample: its own gather serves no other
             break
         pick = rest[::step]
-        e_pick, radiance, dist = gather.gather(x[pick], ns[pick], ng[pick], rng, stats)
-        g = irradiance_and_gradients(radiance, dist, gather.m, gather.n,
-                                     frames_from_normals(ns[pick]), misses_count=False)
         footprint = np.linalg.norm(x[pick] - indirect.eye, axis=1) * indirect.pixel_angle
         reach = np.maximum(R_MIN_PIXELS * footprint / a, 1e-12)
-        trans = limit_translational_gradient(g.trans_grad, g.irradiance, g.radius, reach)
-        local.add(x[pick], ns[pick], g.irradiance, reach, g.rot_grad, trans)
+        e_pick, e_rec, radius, rot, trans, _var = _gathered_records(
+            indirect.gather, x[pick], ns[pick], ng[pick], rng, reach, reach, stats)
+        local.add(x[pick], ns[pick], e_rec, radius, rot, trans)
         e[pick] = e_pick
         made += len(pick)
         keep = np.ones(len(rest), bool)
@@ -316,6 +312,25 @@ def _local_cache_records(indirect: _CachedIndirect, x, ns, ng, rest, e, covered,
     return rest, made
 
 
+def _gathered_records(gather: _FinalGather, x, ns, ng, rng, r_min, r_max, stats=None):
+    """Irradiance-cache records at points ``x`` (normals ``ns``, offset normals ``ng``): a
+    final gather at each, Ward's E, R and gradients from it (``irradiance_and_gradients``,
+    misses not counted), R clamped to [``r_min``, ``r_max``] [m] and the translational
+    gradient limited to the clamped R. Returns (E as the gather gives it, the records' E, R,
+    rotational and translational gradients, the gathers' noise variance)."""
+    from .irradiance_cache import (clamp_radius, frames_from_normals, irradiance_and_gradients,
+                                   limit_translational_gradient)
+
+    e, radiance, dist = gather.gather(x, ns, ng, rng, stats)
+    g = irradiance_and_gradients(radiance, dist, gather.m, gather.n, frames_from_normals(ns),
+                                 misses_count=False)
+    # (Limiting R further to E / |grad_t E| was tried and dropped: with noisy records it
+    # shrinks the ones that caught a bright patch; Scene 2 came out 26 % dark.)
+    radius = clamp_radius(g.radius, r_min, r_max)
+    trans = limit_translational_gradient(g.trans_grad, g.irradiance, g.radius, radius)
+    return e, g.irradiance, radius, g.rot_grad, trans, g.variance
+
+
 CACHE_STRIDES = (32, 16, 8, 4, 2, 1)     # placement passes: every 32nd pixel, then 16th, ...
 R_MIN_PIXELS = 1.5                       # a record reaches at least this many pixels ...
 R_MAX_PIXELS = 64.0                      # ... and at most this many (R clamped, DESIGN §4)
@@ -331,14 +346,12 @@ def _cache_prepass(scene, accel, arrays, gather: _FinalGather, settings, pool, t
     over the image. After each pass (``cache_refine``) every record is checked against the
     gathers of its neighbours (``consistent_radii``): records whose extrapolation a neighbour
     contradicts reach less far, so the next pass puts records between them, and after the
-    last pass the camera's batches fill what no record covers (``_CachedIndirect``). Measured on the seed's
-    Scene 2 (160 x 120, ``final``, two seeds) against a gather at every pixel: the knot's
+    last pass the camera's batches fill what no record covers (``_CachedIndirect``).
+    Measured on the seed's Scene 2 (160 x 120, ``final``, two seeds) against a gather at every pixel: the knot's
     indirect shadow on the floor came out 17 % bright and the worst 4 x 4 block +4.3 % with
     Ward's weight alone, +1.3 % and 0.8 % with the check, for 4,520 records instead of 2,625
     and 13.9 s instead of 10.3 s."""
-    from .irradiance_cache import (IrradianceCache, clamp_radius, consistent_radii,
-                                   frames_from_normals, irradiance_and_gradients,
-                                   limit_translational_gradient)
+    from .irradiance_cache import IrradianceCache, consistent_radii
 
     # Over the full frame, whatever the render border: a tile of a still gets the records the
     # whole frame would (so tiles reassemble into the full render, pixel for pixel).
@@ -377,16 +390,10 @@ def _cache_prepass(scene, accel, arrays, gather: _FinalGather, settings, pool, t
             def record(part, number):
                 prng = sampling.rng_for(settings.seed, sampling.STREAM_GATHER,
                                         (pass_index << 16) + number)
-                e, radiance, dist = gather.gather(x[part], ns[part], ng[part], prng)
-                frames = frames_from_normals(ns[part])
-                g = irradiance_and_gradients(radiance, dist, gather.m, gather.n, frames,
-                                             misses_count=False)
-                # (Limiting R further to E / |grad_t E| was tried and dropped: with noisy records
-                # it shrinks the ones that caught a bright patch; Scene 2 came out 26 % dark.)
-                radius = clamp_radius(g.radius, R_MIN_PIXELS * footprint[part] / a,
-                                      R_MAX_PIXELS * footprint[part] / a)
-                trans = limit_translational_gradient(g.trans_grad, g.irradiance, g.radius, radius)
-                return part, g.irradiance, radius, g.rot_grad, trans, g.variance
+                _e, e_rec, radius, rot, trans, var = _gathered_records(
+                    gather, x[part], ns[part], ng[part], prng,
+                    R_MIN_PIXELS * footprint[part] / a, R_MAX_PIXELS * footprint[part] / a)
+                return part, e_rec, radius, rot, trans, var
 
             for part, e, radius, rot, trans, var in pool.map(record, parts, range(len(parts))):
                 cache.add(x[part], ns[part], e, radius, rot, trans)

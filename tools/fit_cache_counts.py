@@ -12,7 +12,8 @@ What it computes
     60 and 90 degrees (160 x 120, a = 0.2, gather 8 x 32), and for each the records the
     placement passes made (with the neighbour check, ``cache_refine``) and the share of the
     cache look-ups that needed a gather in the camera stage (no placed record covered them,
-    and they made a batch-local record or had no local record near: gathered afresh). Then the least-squares fits
+    and they made a batch-local record or had no local record near: gathered afresh). Then
+    the least-squares fits
         ln(records)              = c0 + c1 ln F + c2 ln a + c3 ln F ln a
         ln(uncovered share)      = u0 + u1 ln F + u2 ln a
     (F the frame's pixels) over the seed scenes' eight renders, and how far each render, the
@@ -25,8 +26,8 @@ What it computes
     Scene 2, x1.00-1.11 in the room and x1.04-23.7 for the plate with the view. No one number
     of a scene foresees it: the concentration of the light's first hits (the flux-weighted
     mean irradiance over the mean, from 50k photons' first hits in voxels of 1/48 of the
-    scene) is 39 for Scene 1, 304 for Scene 2, 29 for the room and 1049 for the plate. Counts do not depend on the machine's speed,
-    so the fit can run on a busy machine.
+    scene) is 39 for Scene 1, 304 for Scene 2, 29 for the room and 1049 for the plate.
+    Counts do not depend on the machine's speed, so the fit can run on a busy machine.
 
 Usage (from the repository root, with the project's virtualenv)::
 
@@ -102,7 +103,8 @@ def measure():
     for label, scene, settings in cases():
         result = render(scene, RenderSettings(samples=16, seed=1, light_samples=1, **settings))
         cam = result.report["stages"]["camera"]
-        lookups = cam["cache_interpolated"] + cam["cache_local_interpolated"] + cam["cache_gathered"]
+        lookups = (cam["cache_interpolated"] + cam["cache_local_interpolated"]
+                   + cam["cache_gathered"])
         w, h = scene.camera.resolution
         plain = render(scene, RenderSettings(samples=1, seed=1, light_samples=1,
                                              cache_refine=False, **settings))

@@ -334,7 +334,7 @@ def measure_rates(threads=0, tell=print, repeat=REPEAT) -> est.Rates:
     for cam in cameras:
         sums["lookup"] += max(cam["seconds"] - direct_part(cam) - cam["gather_rays"]
                               * r["gather_ray"] - cam["gather_points"] * r["gather_point"], 0.0)
-        sums["interpolated"] += cam["cache_interpolated"] + cam.get("cache_local_interpolated", 0)
+        sums["interpolated"] += cam["cache_interpolated"] + cam["cache_local_interpolated"]
     r["photon_emit"] = max(tiny, sums["emit"] / sums["emitted"])
     r["photon_ray"] = max(tiny, sums["trace"] / sums["rays"])
     r["photon_store"] = max(tiny, sums["store"] / sums["stored"])
