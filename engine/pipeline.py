@@ -336,7 +336,8 @@ R_MIN_PIXELS = 1.5                       # a record reaches at least this many p
 R_MAX_PIXELS = 64.0                      # ... and at most this many (R clamped, DESIGN §4)
 
 
-def _cache_prepass(scene, accel, arrays, gather: _FinalGather, settings, pool, tell, cancelled):
+def _cache_prepass(scene, accel, arrays, gather: _FinalGather, settings, pool, tell, cancelled,
+                   strides=CACHE_STRIDES, pixel_mask=None):
     """Place irradiance-cache records in passes of increasing image resolution (Ward's
     "overture", the seed's cache placement): the first hits of pixel centres on a grid of
     stride 32, 16, ..., 1; at each pass the points no record covers get new records, computed
@@ -350,7 +351,12 @@ def _cache_prepass(scene, accel, arrays, gather: _FinalGather, settings, pool, t
     Measured on the seed's Scene 2 (160 x 120, ``final``, two seeds) against a gather at every pixel: the knot's
     indirect shadow on the floor came out 17 % bright and the worst 4 x 4 block +4.3 % with
     Ward's weight alone, +1.3 % and 0.8 % with the check, for 4,520 records instead of 2,625
-    and 13.9 s instead of 10.3 s."""
+    and 13.9 s instead of 10.3 s.
+
+    ``strides`` (default ``CACHE_STRIDES``) and ``pixel_mask`` (a (height, width) bool array
+    of the full frame: only its pixels are placed; default all) let a study place a part of
+    the cache (``tools/fit_cache_counts.py --pilots``); renders use the defaults. The stats'
+    ``record_pixels`` give each record's frame pixel."""
     from .irradiance_cache import IrradianceCache, consistent_radii
 
     # Over the full frame, whatever the render border: a tile of a still gets the records the
@@ -361,6 +367,8 @@ def _cache_prepass(scene, accel, arrays, gather: _FinalGather, settings, pool, t
     origins, directions, tmax = pixel_rays(cam, 0, width * height, 1, rng, centres=True)
     t_hit, prim, bu, bv = accel.intersect(origins, directions, tmax)
     hit = prim >= 0
+    if pixel_mask is not None:
+        hit &= np.asarray(pixel_mask, bool).reshape(-1)
     pixel = np.nonzero(hit)[0]
     t_hit, prim, bu, bv = t_hit[hit], prim[hit], bu[hit], bv[hit]
     d = directions[hit]
@@ -375,7 +383,7 @@ def _cache_prepass(scene, accel, arrays, gather: _FinalGather, settings, pool, t
     stats = {"passes": [], "records": 0}
     record_point, record_variance = [], []       # per record: its pixel's hit, its noise
     chunk = 256
-    for pass_index, stride in enumerate(CACHE_STRIDES):
+    for pass_index, stride in enumerate(strides):
         if cancelled is not None and cancelled():
             break
         on_grid = (row % stride == 0) & (col % stride == 0)
@@ -409,9 +417,11 @@ def _cache_prepass(scene, accel, arrays, gather: _FinalGather, settings, pool, t
                                      r_min=R_MIN_PIXELS * footprint[points] / a)
             shrunk = cache.limit_radius(bound)
         stats["passes"].append({"stride": stride, "new_records": made, "shrunk": shrunk})
-        tell((pass_index + 1) / len(CACHE_STRIDES),
-             f"Irradiance cache: pass {pass_index + 1}/{len(CACHE_STRIDES)}, {len(cache):,} records")
+        tell((pass_index + 1) / len(strides),
+             f"Irradiance cache: pass {pass_index + 1}/{len(strides)}, {len(cache):,} records")
     stats["records"] = len(cache)
+    stats["record_pixels"] = (pixel[np.concatenate(record_point)] if record_point
+                              else np.zeros(0, np.int64))
     return cache, stats
 
 
