@@ -58,7 +58,10 @@ the cache is placed over it, so a tile (render border) renders as its part of th
                            check makes the count depend on the light (Scene 2's indirect
                            shadows double it at ``final``, Scene 1 gains 4 %) and the view
                            more so (two rooms at 40-90 degrees lay at 0.1-2.3 of it): a guide,
-                           not a forecast. (An earlier fit scaled with tan(fov/2), as wider
+                           not a forecast. Two pilots before the render (the first passes;
+                           the placement on a quarter of the frame: ``tools/fit_cache_counts.py
+                           --pilots``) did no better for 10-30 % of the placement's time.
+                           (An earlier fit scaled with tan(fov/2), as wider
                            views of the rooms saw more corners per pixel; with the check the
                            narrower Scene 2 has the most records, and the factor is gone.)
     gathered look-ups      cache: look-ups x f, f = exp(u0) F^u1 a^u2 (the share that needs a
