@@ -147,27 +147,6 @@ PILOT_PHOTONS = 100_000
 WINDOW_SHARE = 0.25
 
 
-def _pilot_maps(scene, settings):
-    from concurrent.futures import ThreadPoolExecutor
-
-    from lanterna.engine import pipeline as P
-    from lanterna.engine.accel import Accelerator
-    from lanterna.engine.gather import RadianceEstimates
-    from lanterna.engine.photons import auto_max_radius, build_photon_map
-
-    scene.validate()
-    pool = ThreadPoolExecutor(settings.worker_count)
-    accel = Accelerator(scene.triangles, threads=1)
-    arrays = P._SceneArrays(scene)
-    pmap = build_photon_map(scene, accel, PILOT_PHOTONS, seed=settings.seed,
-                            max_bounces=settings.bounces, keep="all", pool=pool)
-    radius = auto_max_radius(scene, len(pmap), settings.photon_k)
-    estimates = RadianceEstimates.build(pmap, k=settings.photon_k, max_radius=radius, pool=pool)
-    gather = P._FinalGather(estimates, accel, arrays, settings.gather_m, settings.gather_n, 1,
-                            pmap, settings.gather_guided)
-    return pool, accel, arrays, gather
-
-
 def pilots(scene, settings_dict) -> dict:
     """The two pilots of the module docstring for one case: known records K (passes pilot),
     and the windows pilot's weighted record count over the whole frame."""
@@ -175,27 +154,25 @@ def pilots(scene, settings_dict) -> dict:
     from dataclasses import replace
 
     from lanterna.engine import pipeline as P
-    from lanterna.engine.camera import pixel_rays
 
     settings = P.RenderSettings(samples=16, seed=1, light_samples=1, **settings_dict).resolved()
-    pool, accel, arrays, gather = _pilot_maps(scene, settings)
+    # The pipeline's own stages 1-6 on a small map: with indirect="gather" they end at the
+    # final gather the placement passes use, and place no cache.
+    prep = P._prepare(scene, replace(settings, photons=PILOT_PHOTONS, indirect="gather"),
+                      None, None, None)
+    accel, arrays, pool, gather = prep.accel, prep.arrays, prep.pool, prep.photon
     a = settings.cache_error
     quiet = lambda *args: None                                     # noqa: E731
     t0 = time.perf_counter()
     cache, stats = P._cache_prepass(scene, accel, arrays, gather, settings, pool, quiet, None,
                                     strides=(32, 16, 8))
-    cam = replace(scene.camera, border=None)
+    cam = scene.camera
     w, h = cam.window_size
-    o, d, tmax = pixel_rays(cam, 0, w * h, 1, np.random.default_rng(0), centres=True)
-    t, prim, bu, bv = accel.intersect(o, d, tmax)
-    hit = prim >= 0
-    x = o[hit] + t[hit][:, None] * d[hit]
-    _ng, ns, _ = P._surface_normals(arrays, prim[hit], bu[hit], bv[hit], d[hit])
-    diffuse = arrays.is_diffuse[arrays.material_ids[prim[hit]]]
-    row, col = np.divmod(np.nonzero(hit)[0][diffuse], w)
+    hits = P._centre_hits(scene, accel, arrays)
+    row, col = np.divmod(hits.pixel[hits.diffuse], w)
     on4 = (row % 4 == 0) & (col % 4 == 0)
-    _e, covered, _w, _c = cache.interpolate(x[diffuse][on4], ns[diffuse][on4], a,
-                                            count_usage=False)
+    _e, covered, _w, _c = cache.interpolate(hits.x[hits.diffuse][on4],
+                                            hits.ns[hits.diffuse][on4], a, count_usage=False)
     known = len(cache) + int((~covered).sum())
     passes_seconds = time.perf_counter() - t0
 
@@ -225,8 +202,7 @@ def pilots(scene, settings_dict) -> dict:
     inside = np.zeros(sx.shape, bool)
     for x0, y0, x1, y1 in rects:
         inside |= (sx >= x0) & (sx < x1) & (sy >= y0) & (sy < y1)
-    pool.shutdown()
-    accel.close()
+    prep.close()
     return {"pilot_known": known, "pilot_passes_seconds": passes_seconds,
             "pilot_windows": float(inside.mean(axis=1).sum() / (mask.sum() / (w * h))),
             "pilot_windows_seconds": window_seconds}
