@@ -356,7 +356,8 @@ def _cache_prepass(scene, accel, arrays, gather: _FinalGather, settings, pool, t
     ``strides`` (default ``CACHE_STRIDES``) and ``pixel_mask`` (a (height, width) bool array
     of the full frame: only its pixels are placed; default all) let a study place a part of
     the cache (``tools/fit_cache_counts.py --pilots``); renders use the defaults. The stats'
-    ``record_pixels`` give each record's frame pixel."""
+    ``record_pixels`` and ``record_footprint`` give each record's frame pixel and that pixel's
+    footprint [m] at the hit."""
     from .irradiance_cache import IrradianceCache, consistent_radii
 
     # Over the full frame, whatever the render border: a tile of a still gets the records the
@@ -420,8 +421,8 @@ def _cache_prepass(scene, accel, arrays, gather: _FinalGather, settings, pool, t
         tell((pass_index + 1) / len(strides),
              f"Irradiance cache: pass {pass_index + 1}/{len(strides)}, {len(cache):,} records")
     stats["records"] = len(cache)
-    stats["record_pixels"] = (pixel[np.concatenate(record_point)] if record_point
-                              else np.zeros(0, np.int64))
+    points = np.concatenate(record_point) if record_point else np.zeros(0, np.int64)
+    stats["record_pixels"], stats["record_footprint"] = pixel[points], footprint[points]
     return cache, stats
 
 

@@ -164,8 +164,8 @@ def pilots(scene, settings_dict) -> dict:
     a = settings.cache_error
     quiet = lambda *args: None                                     # noqa: E731
     t0 = time.perf_counter()
-    cache, stats = P._cache_prepass(scene, accel, arrays, gather, settings, pool, quiet, None,
-                                    strides=(32, 16, 8))
+    cache, _stats = P._cache_prepass(scene, accel, arrays, gather, settings, pool, quiet, None,
+                                     strides=(32, 16, 8))
     cam = scene.camera
     w, h = cam.window_size
     hits = P._centre_hits(scene, accel, arrays)
@@ -180,28 +180,25 @@ def pilots(scene, settings_dict) -> dict:
     cw, ch = w / cells, h / cells
     ww, wh = (max(1, int(round(v * np.sqrt(WINDOW_SHARE)))) for v in (cw, ch))
     mask = np.zeros((h, w), bool)
-    rects = []
     for i in range(cells):
         for j in range(cells):
             x0, y0 = int(round(j * cw + (cw - ww) / 2)), int(round(i * ch + (ch - wh) / 2))
             mask[y0:y0 + wh, x0:x0 + ww] = True
-            rects.append((x0, y0, x0 + ww, y0 + wh))
     t0 = time.perf_counter()
     cache, stats = P._cache_prepass(scene, accel, arrays, gather, settings, pool, quiet, None,
                                     pixel_mask=mask)
     window_seconds = time.perf_counter() - t0
-    eye = np.asarray(cam.matrix, np.float64)[:3, 3]
-    footprint = np.linalg.norm(cache.positions - eye, axis=1) * 2 * cam.tan_half_x / w
-    reach = a * cache.radius / footprint                       # pixels
+    reach = a * cache.radius / stats["record_footprint"]       # pixels
     py, px = np.divmod(stats["record_pixels"], w)
     ring = np.sqrt((np.arange(4) + 0.5) / 4)
     turn = np.linspace(0, 2 * np.pi, 16, endpoint=False)
     disc = np.array([(r * np.cos(q), r * np.sin(q)) for r in ring for q in turn])
     sx = px[:, None] + 0.5 + reach[:, None] * disc[None, :, 0]
     sy = py[:, None] + 0.5 + reach[:, None] * disc[None, :, 1]
+    # a disc sample counts where it falls on a window pixel of the mask
+    in_frame = (sx >= 0) & (sx < w) & (sy >= 0) & (sy < h)
     inside = np.zeros(sx.shape, bool)
-    for x0, y0, x1, y1 in rects:
-        inside |= (sx >= x0) & (sx < x1) & (sy >= y0) & (sy < y1)
+    inside[in_frame] = mask[sy[in_frame].astype(np.int64), sx[in_frame].astype(np.int64)]
     prep.close()
     return {"pilot_known": known, "pilot_passes_seconds": passes_seconds,
             "pilot_windows": float(inside.mean(axis=1).sum() / (mask.sum() / (w * h))),
