@@ -248,26 +248,40 @@ class PhotonMap:
         k = 50 queries as fast (63k/s against 65k/s on 2 cores), so pykdtree is the default.
         ``reorder`` False keeps the photons' order (a map saved after its build is already in
         Morton order; ``from_arrays`` rebuilds it bit for bit)."""
+        from concurrent.futures import ThreadPoolExecutor
+
         t0 = time.perf_counter()
+        if library == "pykdtree":
+            from pykdtree.kdtree import KDTree
+            make_tree = lambda x: KDTree(np.ascontiguousarray(x, np.float32), leafsize=16)
+        elif library == "scipy":
+            from scipy.spatial import cKDTree
+            make_tree = lambda x: cKDTree(x, leafsize=16)
+        else:
+            raise ValueError(f"unknown kd-tree library {library!r} (pykdtree or scipy)")
         self.library = library
         if len(self):
             # Store the photons in Morton order: neighbours in space are neighbours in memory.
             self.lo, self.hi = column_bounds(self.positions)
-        if len(self) and reorder:
-            order = morton_order(self.positions, self.lo, self.hi)
-            for key in ("positions", "power", "incoming", "normals", "bounces"):
-                setattr(self, key, np.take(getattr(self, key), order, axis=0))
+        order = morton_order(self.positions, self.lo, self.hi) if len(self) and reorder else None
+        if order is not None:
+            self.positions = np.take(self.positions, order, axis=0)
         if len(self) == 0:
             self._tree = None
-        elif library == "pykdtree":
-            from pykdtree.kdtree import KDTree
-            self._tree = KDTree(np.ascontiguousarray(self.positions, np.float32), leafsize=16)
-        elif library == "scipy":
-            from scipy.spatial import cKDTree
-            self._tree = cKDTree(self.positions, leafsize=16)
         else:
-            raise ValueError(f"unknown kd-tree library {library!r} (pykdtree or scipy)")
-        self._directions = np.ascontiguousarray(np.concatenate([self.incoming, self.normals], axis=1))
+            # The tree needs only the positions: it builds on a helper thread (both libraries
+            # release the GIL) while this one reorders the other columns (4.4M photons:
+            # 1.15 s against 1.4-1.7 s one after the other, measured here).
+            with ThreadPoolExecutor(1) as helper:
+                tree = helper.submit(make_tree, self.positions)
+                if order is not None:
+                    for key in ("power", "incoming", "normals", "bounces"):
+                        setattr(self, key, np.take(getattr(self, key), order, axis=0))
+                self._directions = np.ascontiguousarray(
+                    np.concatenate([self.incoming, self.normals], axis=1))
+                self._tree = tree.result()
+        if self._tree is None:
+            self._directions = np.ascontiguousarray(np.concatenate([self.incoming, self.normals], axis=1))
         self.stats["build_seconds"] = time.perf_counter() - t0
         self.stats["library"] = library
         return self

@@ -390,7 +390,8 @@ def _cache_prepass(scene, accel, arrays, gather: _FinalGather, settings, pool, t
         on_grid = (row % stride == 0) & (col % stride == 0)
         idx = np.nonzero(on_grid)[0]
         if len(cache) and len(idx):
-            _e, covered, _w, _c = cache.interpolate(x[idx], ns[idx], a, count_usage=False)
+            _e, covered, _w, _c = cache.interpolate(x[idx], ns[idx], a, count_usage=False,
+                                                    pool=pool)
             idx = idx[~covered]
         made = 0
         if len(idx):
@@ -415,7 +416,7 @@ def _cache_prepass(scene, accel, arrays, gather: _FinalGather, settings, pool, t
             # then fill the gap (an indirect shadow gets records of its own).
             points = np.concatenate(record_point)
             bound = consistent_radii(cache, a, np.concatenate(record_variance),
-                                     r_min=R_MIN_PIXELS * footprint[points] / a)
+                                     r_min=R_MIN_PIXELS * footprint[points] / a, pool=pool)
             shrunk = cache.limit_radius(bound)
         stats["passes"].append({"stride": stride, "new_records": made, "shrunk": shrunk})
         tell((pass_index + 1) / len(strides),
