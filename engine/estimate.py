@@ -78,7 +78,7 @@ the cache is placed over it, so a tile (render border) renders as its part of th
 
 Time [s] (rates: seconds per unit, measured with ``rates.workers`` threads)
     validate = T r_validate; accel_build = T r_bvh
-    photons = N r_emit + rays r_photon_ray + stored_all r_photon_store
+    photons = N r_emit + rays r_photon_ray + stored_all r_photon_store(stored_all)
     radiance_estimates = estimates r_estimate (k + 10) / 60 (the k-dependence assumed, not
     measured: a query's fixed cost and one per neighbour)
     irradiance_cache = F r_cache_pixel + records (G r_gather_ray + r_gather_point)
@@ -96,6 +96,11 @@ Time [s] (rates: seconds per unit, measured with ``rates.workers`` threads)
     size of the photon map: raw pykdtree queries slow 2.5-6x from 50k to 3M points (k = 4
     to 128), but the renderer asks in Morton order or in batches of nearby points, and its
     estimate rate measured the same (7.5-7.8 us) at 0.75M and at 2.7-4.4M stored photons.
+    The map's build is: per stored photon it cost 0.20 us at 0.96M and 0.48 us at 4.8M
+    (2026-12-02; the Morton reorder's gathers and the kd-tree leave the caches), so the rates
+    file holds the build at both sizes (``STORE_KEYS``, the calibration's cache renders and
+    a 1.5M-photon map) and r_photon_store is interpolated in ln(stored_all) between them
+    like the ray rates (no shift below the small map, extrapolated above the large one).
 
 A shared machine
     Rates are wall time on the machine as it was while they were measured; other work slows
@@ -174,6 +179,10 @@ RATE_KEYS = {
 }
 RAW_KEYS = ("triangles_small", "triangles_large", "incoherent_small", "incoherent_large",
             "coherent_small", "coherent_large")
+# The photon map's build at two sizes: stored photons, seconds per stored photon (optional:
+# a rates file without them keeps one store rate for every size).
+STORE_KEYS = ("stored_small", "stored_large", "store_small", "store_large")
+RAW_GROUPS = (RAW_KEYS, STORE_KEYS)
 PARALLEL_RATES = {"photon_ray", "radiance_estimate", "gather_ray", "gather_point",
                   "shadow_photon", "camera_sample", "shadow_ray", "light_sample",
                   "cache_lookup", "photon_lookup"}
@@ -214,7 +223,9 @@ class RatesError(ValueError):
 @dataclass
 class Rates:
     """Seconds per unit of every ``RATE_KEYS`` entry, measured with ``workers`` threads on
-    a machine with ``cores`` cores, and raw embreex seconds per ray (``RAW_KEYS``)."""
+    a machine with ``cores`` cores, raw embreex seconds per ray (``RAW_KEYS``) and the
+    photon map's build at two sizes (``STORE_KEYS``); each group is kept whole or not at
+    all."""
 
     seconds: dict
     workers: int = 2
@@ -260,9 +271,10 @@ class Rates:
         if not isinstance(raw, dict):
             raise RatesError("'raw' is not an object")
         raw_ok = {}
-        if all(isinstance(raw.get(k), (int, float)) and not isinstance(raw.get(k), bool)
-               and math.isfinite(raw[k]) and raw[k] > 0 for k in RAW_KEYS):
-            raw_ok = {k: float(raw[k]) for k in RAW_KEYS}
+        for group in RAW_GROUPS:
+            if all(isinstance(raw.get(k), (int, float)) and not isinstance(raw.get(k), bool)
+                   and math.isfinite(raw[k]) and raw[k] > 0 for k in group):
+                raw_ok.update({k: float(raw[k]) for k in group})
         return cls(seconds=out, workers=workers, cores=cores, raw=raw_ok,
                    measured=str(data.get("measured", "")), source=source)
 
@@ -322,7 +334,9 @@ def load_rates(user_path=None, default_path=None) -> Rates:
         else:
             missing = [k for k in RATE_KEYS if k not in mine.seconds]
             mine.seconds = {**defaults.seconds, **mine.seconds}
-            mine.raw = mine.raw or defaults.raw
+            for group in RAW_GROUPS:            # a group the user's file lacks: shipped
+                if not all(k in mine.raw for k in group) and all(k in defaults.raw for k in group):
+                    mine.raw.update({k: defaults.raw[k] for k in group})
             if missing:
                 mine.warnings.append(f"Rates file {user} lacks {', '.join(missing)}; those "
                                      "come from the rates shipped with Lanterna")
@@ -712,8 +726,9 @@ def _log_shift(raw: dict, size_key: str, cost_key: str, size: float, reference: 
     """Raw cost at ``size`` minus at ``reference`` (two measured sizes ``{size_key}_small /
     _large`` with costs ``{cost_key}_small / _large``, interpolated in ln size, extrapolated
     above them; sizes below the small one count as the small one, where fixed costs
-    dominate)."""
-    if not raw:
+    dominate). 0 when ``raw`` lacks the four entries."""
+    keys = [f"{k}_{end}" for k in (size_key, cost_key) for end in ("small", "large")]
+    if not all(k in raw for k in keys):
         return 0.0
     t0, t1 = raw[f"{size_key}_small"], raw[f"{size_key}_large"]
     c0, c1 = raw[f"{cost_key}_small"], raw[f"{cost_key}_large"]
@@ -725,9 +740,18 @@ def _log_shift(raw: dict, size_key: str, cost_key: str, size: float, reference: 
 
 def _trace_shift(rates: Rates, triangles: int, kind: str) -> float:
     """Raw Embree seconds per ray at ``triangles`` minus at the calibration scene's count."""
-    if not rates.raw:
+    if "triangles_small" not in rates.raw:
         return 0.0
     return _log_shift(rates.raw, "triangles", kind, triangles, rates.raw["triangles_small"])
+
+
+def _store_shift(rates: Rates, stored: float) -> float:
+    """Seconds per stored photon at a map of ``stored`` photons minus at the calibration's
+    small map (``STORE_KEYS``; the Morton reorder and the kd-tree reach further out of the
+    caches as the map grows)."""
+    if "stored_small" not in rates.raw:
+        return 0.0
+    return _log_shift(rates.raw, "stored", "store", stored, rates.raw["stored_small"])
 
 
 def estimate_from_facts(facts: SceneFacts, settings, rates: Rates | None = None, passes=(),
@@ -781,8 +805,9 @@ def estimate_from_facts(facts: SceneFacts, settings, rates: Rates | None = None,
         if reused:
             add("photons", 0.0, emitted=0, reused=1)
         else:
+            store = max(0.3 * r["photon_store"], r["photon_store"] + _store_shift(rates, stored_all))
             add("photons", emitted * r["photon_emit"] + rays * r["photon_ray"]
-                + stored_all * r["photon_store"], stored * PHOTON_BYTES,
+                + stored_all * store, stored * PHOTON_BYTES,
                 stored_all * PHOTON_BUILD_BYTES + min(W, 1 + emitted // 131072)
                 * PHOTON_CHUNK_BYTES, emitted=int(emitted), photon_rays=rays, stored=stored)
         if plan["radiance_estimates"]:

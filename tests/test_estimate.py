@@ -14,7 +14,8 @@ What is checked (no timings are asserted: the machine is shared; ``lanterna benc
   work (a spy on the BVH build is never called).
 * ``lanterna render --dry-run`` prints the plan and the table, writes nothing, exits 0.
 * Rates files: round trip; the user file wins; a partial one is completed from the
-  defaults with a warning; a corrupt one gives a warning naming it and the defaults are
+  defaults with a warning; the raw groups (rays by triangle count, the photon map's build by
+  its size) are kept or dropped whole, and the store rate follows the map's size; a corrupt one gives a warning naming it and the defaults are
   used (also in a render's report); the shipped file is complete and packaged.
 """
 import json
@@ -215,7 +216,8 @@ def test_unusable_scene_arrays_are_left_to_the_validate_stage():
 # -- Rates files ------------------------------------------------------------------------------
 def _rates(value=1e-6):
     raw = {k: 1e-6 * (i + 1) for i, k in enumerate(estimate.RAW_KEYS)}
-    raw.update(triangles_small=1e3, triangles_large=1e6)
+    raw.update(triangles_small=1e3, triangles_large=1e6, stored_small=1e6, stored_large=4e6,
+               store_small=0.2e-6, store_large=0.4e-6)
     return estimate.Rates(seconds={k: value for k in estimate.RATE_KEYS}, workers=2, cores=2,
                           raw=raw, measured="test")
 
@@ -230,6 +232,52 @@ def test_rates_round_trip_and_the_user_file_wins(tmp_path):
     assert loaded.source == str(path) and loaded.warnings == []
     assert loaded.seconds["camera_sample"] == 2.5e-6
     assert [p.name for p in path.parent.iterdir()] == ["rates.json"]     # no temporary left
+
+
+def test_store_rate_follows_the_size_of_the_map():
+    """The per-photon build cost is interpolated in ln(stored) between the two measured maps
+    (0.2 us at 1M, 0.4 us at 4M here), held at the small map's below it, extrapolated above;
+    a rates file without the pair keeps one rate, and the photon stage's estimate follows."""
+    rates = _rates()
+    assert estimate._store_shift(rates, 1e6) == 0.0
+    assert estimate._store_shift(rates, 2e5) == 0.0
+    assert estimate._store_shift(rates, 2e6) == pytest.approx(0.1e-6, rel=1e-12)
+    assert estimate._store_shift(rates, 4e6) == pytest.approx(0.2e-6, rel=1e-12)
+    assert estimate._store_shift(rates, 16e6) == pytest.approx(0.4e-6, rel=1e-12)
+    flat = estimate.Rates(**{**rates.__dict__, "raw": {k: v for k, v in rates.raw.items()
+                                                       if k not in estimate.STORE_KEYS}})
+    assert estimate._store_shift(flat, 4e6) == 0.0
+    settings = RenderSettings(photons=1_000_000, samples=1)
+    facts = estimate.scene_facts(_room(0.7))
+    with_shift = estimate.estimate_from_facts(facts, settings, rates).stages["photons"]
+    without = estimate.estimate_from_facts(facts, settings, flat).stages["photons"]
+    stored = with_shift.counts["stored"]
+    assert stored > 1e6
+    expected = stored * estimate._store_shift(rates, stored)
+    assert with_shift.seconds - without.seconds == pytest.approx(expected, rel=1e-9)
+
+
+def test_rates_groups_are_kept_whole(tmp_path):
+    """A raw group with a missing or bad entry is dropped whole; the other group stays; a
+    user file lacking a group takes the shipped one's."""
+    data = _rates().to_json()
+    del data["raw"]["store_large"]
+    back = estimate.Rates.from_json(data)
+    assert set(back.raw) == set(estimate.RAW_KEYS)
+    data = _rates().to_json()
+    data["raw"]["coherent_small"] = float("nan")
+    assert set(estimate.Rates.from_json(data).raw) == set(estimate.STORE_KEYS)
+    data = _rates(3e-6).to_json()
+    for key in estimate.STORE_KEYS:
+        del data["raw"][key]
+    path = estimate.user_rates_path()
+    path.parent.mkdir(parents=True)
+    path.write_text(json.dumps(data))
+    loaded = estimate.load_rates()
+    defaults = estimate.read_rates(estimate.DEFAULT_RATES_PATH)
+    assert loaded.raw["coherent_small"] == _rates().raw["coherent_small"]
+    assert {k: loaded.raw[k] for k in estimate.STORE_KEYS} == \
+        {k: defaults.raw[k] for k in estimate.STORE_KEYS}
 
 
 def test_partial_user_file_is_completed_from_the_defaults(tmp_path):
@@ -276,7 +324,8 @@ def test_a_render_reports_the_rates_warning():
 def test_shipped_rates_are_complete_and_packaged():
     rates = estimate.read_rates(estimate.DEFAULT_RATES_PATH)
     assert set(rates.seconds) == set(estimate.RATE_KEYS)
-    assert all(v > 0 for v in rates.seconds.values()) and set(rates.raw) == set(estimate.RAW_KEYS)
+    assert all(v > 0 for v in rates.seconds.values())
+    assert set(rates.raw) == set(estimate.RAW_KEYS) | set(estimate.STORE_KEYS)
     with open(ROOT / "pyproject.toml", "rb") as f:
         setuptools = tomllib.load(f)["tool"]["setuptools"]
     assert "data/*.json" in setuptools["package-data"]["lanterna.engine"]

@@ -17,7 +17,9 @@ What it computes (``lanterna bench --calibrate`` / ``lanterna bench --check-esti
        least squares over rays and points); irradiance-cache renders at 320x240 and 640x480
        with 4x12 strata and at 320x240 with 12x48, 1 spp, 300k photons, a = 0.3 (photon
        emission, tracing and map build; radiance estimates; the placement passes' cost per
-       pixel and per gather ray, non-negative least squares; cache look-ups); and a
+       pixel and per gather ray, non-negative least squares; cache look-ups); a photon map
+       of ``LARGE_MAP_PHOTONS`` in the same room (the map's build per stored photon at a
+       preset's size, about 4M stored, beside the cache renders' 1M: ``STORE_KEYS``); and a
        photon-map look-up render.
     Writes the rates (JSON) to ``--rates-file`` (default ``$XDG_CACHE_HOME/lanterna/
     rates.json`` or ``~/.cache/lanterna/rates.json``) and prints them.
@@ -65,6 +67,7 @@ from .. import estimate as est
 LIVE_EXPORT_TRIANGLES = 200_000
 PASS_FACTOR = 1.5
 REPEAT = 2                       # runs of each measurement and each check; the fastest counts
+LARGE_MAP_PHOTONS = 1_500_000    # the large photon map of the store rate (about 4M stored)
 
 
 # -- The calibration scene (core, no bpy) ------------------------------------------------------
@@ -253,6 +256,33 @@ def _nonnegative_fit(rows, values, floor=0.0):
     return tuple(float(max(c, floor)) for c in costs)
 
 
+def _large_map_store(workers, tell, repeat=REPEAT) -> dict:
+    """The photon map's build (concatenation, Morton reorder, kd-tree) per stored photon at a
+    preset's size: ``LARGE_MAP_PHOTONS`` photons in the calibration room (about 4M stored),
+    the fastest of ``repeat`` passes; ``STORE_KEYS``' large pair."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from ..accel import Accelerator
+    from ..photons import build_photon_map
+
+    scene = calibration_scene((160, 120))
+    accel = Accelerator(scene.triangles, threads=1)
+    tell(f"photon map of {LARGE_MAP_PHOTONS:,} photons")
+    best = None
+    try:
+        with ThreadPoolExecutor(workers) as pool:
+            for _ in range(max(1, repeat)):
+                t0 = time.perf_counter()
+                stats = build_photon_map(scene, accel, LARGE_MAP_PHOTONS, seed=1, pool=pool).stats
+                store = (time.perf_counter() - t0 - stats["emit_seconds"]
+                         - stats["trace_seconds"])
+                best = store if best is None else min(best, store)
+    finally:
+        accel.close()
+    stored = stats["stored_all"]
+    return {"stored_large": float(stored), "store_large": max(best, 1e-12) / max(stored, 1)}
+
+
 def measure_rates(threads=0, tell=print, repeat=REPEAT) -> est.Rates:
     """Measure every rate of ``estimate.RATE_KEYS`` on this machine (module docstring), each
     render ``repeat`` times, the fastest counting."""
@@ -338,6 +368,8 @@ def measure_rates(threads=0, tell=print, repeat=REPEAT) -> est.Rates:
     r["photon_emit"] = max(tiny, sums["emit"] / sums["emitted"])
     r["photon_ray"] = max(tiny, sums["trace"] / sums["rays"])
     r["photon_store"] = max(tiny, sums["store"] / sums["stored"])
+    store = {"stored_small": sums["stored"] / len(cameras), "store_small": r["photon_store"]}
+    store.update(_large_map_store(workers, tell, repeat))
     r["radiance_estimate"] = max(tiny, sums["est"] / sums["estimates"])
     r["cache_lookup"] = max(tiny, sums["lookup"] / max(sums["interpolated"], 1))
 
@@ -348,7 +380,8 @@ def measure_rates(threads=0, tell=print, repeat=REPEAT) -> est.Rates:
     r["photon_lookup"] = max(tiny, (cam["seconds"] - direct_part(cam))
                              / max(cam["photon_queries"], 1))
     return est.Rates(seconds={k: float(r[k]) for k in est.RATE_KEYS}, workers=workers,
-                     cores=os.cpu_count() or 1, raw={k: raw[k] for k in est.RAW_KEYS},
+                     cores=os.cpu_count() or 1,
+                     raw={**{k: raw[k] for k in est.RAW_KEYS}, **store},
                      measured=datetime.datetime.now().isoformat(timespec="seconds"))
 
 
@@ -359,7 +392,11 @@ def print_rates(rates: est.Rates, path=None) -> None:
     for key, what in est.RATE_KEYS.items():
         print(f"  {key:<18} {rates.seconds[key] * 1e6:10.3f} us   {what}")
     raw = rates.raw
-    if raw:
+    if "stored_small" in raw:
+        print("  photon map build: " + ", ".join(
+            f"{raw[f'store_{size}'] * 1e6:.3f} us per photon at {raw[f'stored_{size}'] / 1e6:.2f}M"
+            for size in ("small", "large")))
+    if "triangles_small" in raw:
         for size in ("small", "large"):
             print(f"  raw embreex, {int(raw[f'triangles_{size}']):>9,} triangles: coherent "
                   f"{1e-6 / raw[f'coherent_{size}']:6.2f} Mrays/s, incoherent "
