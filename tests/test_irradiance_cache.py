@@ -688,3 +688,28 @@ def test_limit_radius_only_shrinks_and_rebuilds_the_index():
     assert not c.interpolate(q, up, 0.3, count_usage=False)[1].any()   # reach 0.15 now
     with pytest.raises(ValueError):
         c.limit_radius([0.0, 1.0, 1.0])
+
+
+def test_neighbour_search_in_blocks_on_a_pool_is_the_same():
+    """The check's neighbour search asked in blocks (here of 7 records, on two threads) gives
+    the same pairs, distances and predictions as one call over all records, and the same
+    bounds: the render's pool changes how fast the check runs, not what it finds."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    rng = np.random.default_rng(11)
+    values = 1.0 + 0.8 * (np.arange(60) > 30) + 0.05 * rng.standard_normal(60)
+    c, _ = _records_on_a_line(values, spacing=0.05)
+    whole = c.neighbour_predictions(0.6, chunk=10 ** 6)
+    assert len(whole[0]) > 200
+    with ThreadPoolExecutor(2) as pool:
+        blocks = c.neighbour_predictions(0.6, chunk=7, pool=pool)
+        pooled_bound = consistent_radii(c, 0.3, np.full(len(c), 0.01), pool=pool)
+
+    def rows(result):
+        j, i, d, predicted = result
+        return np.column_stack([j, i, d, predicted])[np.lexsort((i, j))]
+
+    np.testing.assert_array_equal(rows(blocks), rows(whole))
+    bound = consistent_radii(c, 0.3, np.full(len(c), 0.01))
+    assert np.isfinite(bound).sum() > 5
+    np.testing.assert_array_equal(pooled_bound, bound)
