@@ -54,11 +54,12 @@ the cache is placed over it, so a tile (render border) renders as its part of th
                            [ceil(w/32) ceil(h/32), F] (w x h the frame): a least-squares fit
                            (``tools/fit_cache_counts.py``) to the records the placement passes
                            made, with the neighbour check, on the seed's two scenes (160x120
-                           and 640x480, ``preview`` and ``final``): 0.71-1.41 of the fit. The
-                           check makes the count depend on the light (Scene 2's indirect
-                           shadows double it at ``final``, Scene 1 gains 4 %) and the view
-                           more so (two rooms at 40-90 degrees lay at 0.1-2.3 of it): a guide,
-                           not a forecast. Two pilots before the render (the first passes;
+                           and 640x480, ``preview`` and ``final``): 0.81-1.23 of the fit
+                           (2026-12-02, with the coarse-to-fine refill of the check's gaps;
+                           0.71-1.41 before it). The check makes the count depend on the light
+                           (Scene 2's indirect shadows add 23-50 %, Scene 1 gains 0-6 %) and the
+                           view more so (two rooms at 40-90 degrees lay at 0.05-0.9 of it): a
+                           guide, not a forecast. Two pilots before the render (the first passes;
                            the placement on a quarter of the frame: ``tools/fit_cache_counts.py
                            --pilots``) did no better for 10-30 % of the placement's time.
                            (An earlier fit scaled with tan(fov/2), as wider
@@ -69,8 +70,8 @@ the cache is placed over it, so a tile (render border) renders as its part of th
                            edges from the pixel centres the passes saw, where the normal
                            turns fast, where the neighbour check shrank the records) and it
                            makes a batch-local record or has none near), fitted to the same
-                           renders at the presets' 16 spp (0.50-2.8 of the fit; Scene 2's
-                           knot needs 5x Scene 1's share at 160 x 120); ``gather``: every
+                           renders at the presets' 16 spp (0.33-3.5 of the fit; Scene 2's
+                           knot needs 8-11x Scene 1's share at ``final``); ``gather``: every
                            look-up.
     gather rays per point  G = M N (1 + ``gather_guided``)
     shadow photons         ``auto_shadow_photon_count`` (100k-1M, from area and extent)
@@ -209,8 +210,8 @@ SAMPLE_WORK_BYTES = 640
 K_OFFSET = 10                        # estimate cost ~ (k + K_OFFSET) / (50 + K_OFFSET)
 
 # Fits (module docstring, tools/fit_cache_counts.py): cache records, uncovered look-ups.
-RECORD_FIT = (2.16518, 0.28815, -0.64181, -0.07100)
-UNCOVERED_FIT = (-6.70111, -0.12343, -0.80216)
+RECORD_FIT = (3.55561, 0.12247, -0.01359, -0.13934)
+UNCOVERED_FIT = (-7.73603, -0.02467, -1.02819)
 
 GIB = float(1 << 30)
 

@@ -18,12 +18,15 @@ What it computes
         ln(uncovered share)      = u0 + u1 ln F + u2 ln a
     (F the frame's pixels) over the seed scenes' eight renders, and how far each render, the
     rooms' too, lies from them. The rooms scatter far more than F and a can explain (a view
-    of one flat wall needs 55 records, the plate under the spot 899 at the same size and a):
-    what the camera sees and how the light falls decide, which counts known before the render
+    of one flat wall needs 55 records, a room at 90 degrees 978 at the same size and a): what
+    the camera sees and how the light falls decide, which counts known before the render
     cannot tell, so the fit is the seed scenes'. Each case is also placed without the
-    neighbour check (``cache_refine`` off) to show what the check adds: measured 2026-12-01,
-    x1.56-2.05 on Scene 1 at a = 0.3 but x1.01-1.04 at a = 0.1, x1.29-1.47 and x1.76-2.01 on
-    Scene 2, x1.00-1.11 in the room and x1.04-23.7 for the plate with the view. No one number
+    neighbour check (``cache_refine`` off) to show what the check adds: measured 2026-12-02,
+    with the passes refilling the check's gaps coarse to fine, x1.04-1.06 on Scene 1 at
+    a = 0.3 and x1.00 at a = 0.1, x1.23-1.30 and x1.35-1.50 on Scene 2, x1.00-1.01 in the room
+    and x1.01-2.26 for the plate with the view; the seed renders lie at 0.81-1.23 of the fit,
+    the rooms at 0.05-0.89. (Before the refill, 2026-12-01: x1.56-2.05, x1.01-1.04, x1.29-1.47,
+    x1.76-2.01, x1.00-1.11 and x1.04-23.7; the seed renders at 0.71-1.41.) No one number
     of a scene foresees it: the concentration of the light's first hits (the flux-weighted
     mean irradiance over the mean, from 50k photons' first hits in voxels of 1/48 of the
     scene) is 39 for Scene 1, 304 for Scene 2, 29 for the room and 1049 for the plate.
@@ -39,7 +42,8 @@ of the full map's), two pilots:
     windows  the whole placement restricted to ``WINDOW_SHARE`` of the frame (a centred window
              in each cell of a 4 x 4 grid, 2 x 2 below 240 pixels), each record weighed by
              the share of its reach's disc inside the windows, over that share.
-Measured 2026-12-02 (``--pilots``, this tool's eight seed renders and six rooms):
+Measured 2026-12-02, before the refill (``--pilots``, this tool's eight seed renders and six
+rooms):
     passes   0.73-1.44 of the records (0.59-1.81 left out; the F, a fit: 0.71-1.41), rooms
              0.22-1.17; Scene 1 and Scene 2 at 640 x 480, ``final``: 0.88 and 1.09 (the F, a
              fit 0.74 and 1.35), but at 160 x 120, ``final``: 0.73 and 1.43, as the F, a fit;
