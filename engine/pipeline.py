@@ -15,8 +15,10 @@ Stages, in order (DESIGN.md §1)
     6. ``radiance_estimates``  irradiance precomputed at a quarter of the photons
                                (Christensen 1999, ``engine/gather.py``)
     7. ``irradiance_cache``    records placed in passes at pixel strides 32, 16, ..., 1 by the
-                               final gather, with Ward & Heckbert gradients
-                               (``engine/irradiance_cache.py``)
+                               final gather, with Ward & Heckbert gradients, checked against
+                               their neighbours after each pass, the gaps refilled coarse to
+                               fine by the next (``engine/irradiance_cache.py``,
+                               ``_cache_prepass``)
     8. ``camera``              primary rays in batches of whole pixels; at each diffuse hit the
                                emission plus, by ``mode``:
                                ``full``: exact direct light (``engine/direct.py``) + indirect
