@@ -723,9 +723,9 @@ def uncovered_share(pixels: int, a: float) -> float:
     return float(min(1.0, math.exp(u0) * max(pixels, 1) ** u1 * max(a, 1e-3) ** u2))
 
 
-def _log_shift(raw: dict, size_key: str, cost_key: str, size: float, reference: float) -> float:
-    """Raw cost at ``size`` minus at ``reference`` (two measured sizes ``{size_key}_small /
-    _large`` with costs ``{cost_key}_small / _large``, interpolated in ln size, extrapolated
+def _log_shift(raw: dict, size_key: str, cost_key: str, size: float) -> float:
+    """Cost at ``size`` minus at the small measured size (two measured sizes ``{size_key}_small
+    / _large`` with costs ``{cost_key}_small / _large``, interpolated in ln size, extrapolated
     above them; sizes below the small one count as the small one, where fixed costs
     dominate). 0 when ``raw`` lacks the four entries."""
     keys = [f"{k}_{end}" for k in (size_key, cost_key) for end in ("small", "large")]
@@ -736,23 +736,19 @@ def _log_shift(raw: dict, size_key: str, cost_key: str, size: float, reference: 
     if t1 <= t0:
         return 0.0
     slope = (c1 - c0) / math.log(t1 / t0)
-    return slope * (math.log(max(size, t0)) - math.log(max(reference, t0)))
+    return slope * (math.log(max(size, t0)) - math.log(t0))
 
 
 def _trace_shift(rates: Rates, triangles: int, kind: str) -> float:
     """Raw Embree seconds per ray at ``triangles`` minus at the calibration scene's count."""
-    if "triangles_small" not in rates.raw:
-        return 0.0
-    return _log_shift(rates.raw, "triangles", kind, triangles, rates.raw["triangles_small"])
+    return _log_shift(rates.raw, "triangles", kind, triangles)
 
 
 def _store_shift(rates: Rates, stored: float) -> float:
     """Seconds per stored photon at a map of ``stored`` photons minus at the calibration's
     small map (``STORE_KEYS``; the Morton reorder and the kd-tree reach further out of the
     caches as the map grows)."""
-    if "stored_small" not in rates.raw:
-        return 0.0
-    return _log_shift(rates.raw, "stored", "store", stored, rates.raw["stored_small"])
+    return _log_shift(rates.raw, "stored", "store", stored)
 
 
 def estimate_from_facts(facts: SceneFacts, settings, rates: Rates | None = None, passes=(),
@@ -779,6 +775,8 @@ def estimate_from_facts(facts: SceneFacts, settings, rates: Rates | None = None,
     shifts = {key: _trace_shift(rates, T, "incoherent")
               for key in ("photon_ray", "gather_ray", "shadow_ray", "light_sample")}
     shifts["camera_sample"] = _trace_shift(rates, T, "coherent")
+    if pc:
+        shifts["photon_store"] = _store_shift(rates, pc["stored_all"])
     for key, shift in shifts.items():
         r[key] = max(0.3 * r[key], r[key] + shift)
     for key in PARALLEL_RATES:
@@ -806,9 +804,8 @@ def estimate_from_facts(facts: SceneFacts, settings, rates: Rates | None = None,
         if reused:
             add("photons", 0.0, emitted=0, reused=1)
         else:
-            store = max(0.3 * r["photon_store"], r["photon_store"] + _store_shift(rates, stored_all))
             add("photons", emitted * r["photon_emit"] + rays * r["photon_ray"]
-                + stored_all * store, stored * PHOTON_BYTES,
+                + stored_all * r["photon_store"], stored * PHOTON_BYTES,
                 stored_all * PHOTON_BUILD_BYTES + min(W, 1 + emitted // 131072)
                 * PHOTON_CHUNK_BYTES, emitted=int(emitted), photon_rays=rays, stored=stored)
         if plan["radiance_estimates"]:

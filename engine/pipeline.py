@@ -417,7 +417,7 @@ def _cache_prepass(scene, accel, arrays, gather: _FinalGather, settings, pool, t
             if not len(idx):
                 continue
             parts = [idx[i:i + chunk] for i in range(0, len(idx), chunk)]
-            keys = [(pass_index << 40) + (sub_index << 32) + number for number in range(len(parts))]
+            keys = [(pass_index << 40) + (sub_index << 32) + k for k in range(len(parts))]
             for part, e, radius, rot, trans, var in pool.map(record, parts, keys):
                 cache.add(x[part], ns[part], e, radius, rot, trans)
                 record_point.append(part)

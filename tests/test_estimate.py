@@ -15,8 +15,9 @@ What is checked (no timings are asserted: the machine is shared; ``lanterna benc
 * ``lanterna render --dry-run`` prints the plan and the table, writes nothing, exits 0.
 * Rates files: round trip; the user file wins; a partial one is completed from the
   defaults with a warning; the raw groups (rays by triangle count, the photon map's build by
-  its size) are kept or dropped whole, and the store rate follows the map's size; a corrupt one gives a warning naming it and the defaults are
-  used (also in a render's report); the shipped file is complete and packaged.
+  its size) are kept or dropped whole, and the store rate follows the map's size; a corrupt
+  one gives a warning naming it and the defaults are used (also in a render's report); the
+  shipped file is complete and packaged.
 """
 import json
 import tomllib
