@@ -10,7 +10,7 @@ What it computes (``lanterna bench --calibrate`` / ``lanterna bench --check-esti
        the grid also gives the BVH build and validate rates per triangle;
     2. pipeline renders of the calibration scene, each stage's time divided by the counts
        its report gives (``engine/estimate.py`` names the rates):
-       direct light only with 1 and with 4 point lights at 160x120, 16 spp (camera sample
+       direct light only with 1 and with 4 point lights at 320x240, 16 spp (camera sample
        and shadow ray rates, non-negative least squares); an area light with 8 light samples and shadow
        photons (light sample and shadow photon rates); final gathers at every pixel with
        6x24 and 12x48 strata at 40x30 and 1x4 at 96x72 (the gather point rate, non-negative
@@ -20,8 +20,9 @@ What it computes (``lanterna bench --calibrate`` / ``lanterna bench --check-esti
        emission, tracing and map build; radiance estimates; the placement passes' cost per
        pixel and per gather ray, non-negative least squares; cache look-ups); a photon map
        of ``LARGE_MAP_PHOTONS`` in the same room (the map's build per stored photon at a
-       preset's size, about 4M stored, beside the cache renders' 1M: ``STORE_KEYS``); and a
-       photon-map look-up render.
+       preset's size, about 4M stored, beside the cache renders' 1M: ``STORE_KEYS``; its
+       emission is pooled with the cache renders' into the emission rate, measured so at a
+       preset's size too); and a photon-map look-up render.
     Writes the rates (JSON) to ``--rates-file`` (default ``$XDG_CACHE_HOME/lanterna/
     rates.json`` or ``~/.cache/lanterna/rates.json``) and prints them.
 
@@ -69,6 +70,11 @@ LIVE_EXPORT_TRIANGLES = 200_000
 PASS_FACTOR = 1.5
 REPEAT = 2                       # runs of each measurement and each check; the fastest counts
 LARGE_MAP_PHOTONS = 1_500_000    # the large photon map of the store rate (about 4M stored)
+# The direct-light renders of the camera and shadow-ray rates: at 160 x 120 their camera stages
+# took 0.06 and 0.16 s, and two calibrations four hours apart put the shadow ray at 0.125 and
+# 0.075 us; at 320 x 240 they take 0.2 and 0.6 s, and the camera stage's own fixed cost (about
+# 14 ms, measured from 40 x 30 to 640 x 480) weighs 4 times less in the two-render fit.
+DIRECT_RESOLUTION = (320, 240)
 # The cache renders (frame, gather M x N, a): the presets' gathers and errors, preview's at two
 # frame sizes (per pixel against per ray) and final's. (With 4 x 12 gathers a record's fixed
 # costs, about 0.4 ms, came out as 1.4-5 us a ray and lifted the fitted ray rate by 15-25 %.)
@@ -274,7 +280,7 @@ def _large_map_store(workers, tell, repeat=REPEAT) -> dict:
     scene = calibration_scene((160, 120))
     accel = Accelerator(scene.triangles, threads=1)
     tell(f"photon map of {LARGE_MAP_PHOTONS:,} photons")
-    best = None
+    best = emit = None
     try:
         with ThreadPoolExecutor(workers) as pool:
             for _ in range(max(1, repeat)):
@@ -283,10 +289,12 @@ def _large_map_store(workers, tell, repeat=REPEAT) -> dict:
                 store = (time.perf_counter() - t0 - stats["emit_seconds"]
                          - stats["trace_seconds"])
                 best = store if best is None else min(best, store)
+                emit = stats["emit_seconds"] if emit is None else min(emit, stats["emit_seconds"])
     finally:
         accel.close()
     stored = stats["stored_all"]
-    return {"stored_large": float(stored), "store_large": max(best, 1e-12) / max(stored, 1)}
+    return {"stored_large": float(stored), "store_large": max(best, 1e-12) / max(stored, 1),
+            "emit_seconds": float(emit), "emitted": float(LARGE_MAP_PHOTONS)}
 
 
 def measure_rates(threads=0, tell=print, repeat=REPEAT) -> est.Rates:
@@ -309,7 +317,7 @@ def measure_rates(threads=0, tell=print, repeat=REPEAT) -> est.Rates:
     direct = dict(bounces=0, samples=16, threads=threads)
     rows, ys = [], []
     for lights in ("point", "points4"):
-        stages, _ = run(calibration_scene((160, 120), lights), tell,
+        stages, _ = run(calibration_scene(DIRECT_RESOLUTION, lights), tell,
                         f"direct light, {lights}", **direct)
         cam = stages["camera"]
         rows.append((cam["camera_rays"], cam["shadow_rays"]))
@@ -370,11 +378,17 @@ def measure_rates(threads=0, tell=print, repeat=REPEAT) -> est.Rates:
         sums["lookup"] += max(cam["seconds"] - direct_part(cam) - cam["gather_rays"]
                               * r["gather_ray"] - cam["gather_points"] * r["gather_point"], 0.0)
         sums["interpolated"] += cam["cache_interpolated"] + cam["cache_local_interpolated"]
-    r["photon_emit"] = max(tiny, sums["emit"] / sums["emitted"])
+    store = {"stored_small": sums["stored"] / len(cameras)}
+    large = _large_map_store(workers, tell, repeat)
+    # Emission pooled over the cache renders and the large map (its fastest pass), so that it
+    # is measured at a preset's size too (1M photons at ``final``; 300k-photon runs alone gave
+    # 0.19 and 0.34 us a photon in two calibrations).
+    r["photon_emit"] = max(tiny, (sums["emit"] + large.pop("emit_seconds"))
+                           / (sums["emitted"] + large.pop("emitted")))
     r["photon_ray"] = max(tiny, sums["trace"] / sums["rays"])
     r["photon_store"] = max(tiny, sums["store"] / sums["stored"])
-    store = {"stored_small": sums["stored"] / len(cameras), "store_small": r["photon_store"]}
-    store.update(_large_map_store(workers, tell, repeat))
+    store["store_small"] = r["photon_store"]
+    store.update(large)
     r["radiance_estimate"] = max(tiny, sums["est"] / sums["estimates"])
     r["cache_lookup"] = max(tiny, sums["lookup"] / max(sums["interpolated"], 1))
 
