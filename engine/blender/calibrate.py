@@ -69,7 +69,7 @@ from .. import estimate as est
 LIVE_EXPORT_TRIANGLES = 200_000
 PASS_FACTOR = 1.5
 REPEAT = 2                       # runs of each measurement and each check; the fastest counts
-LARGE_MAP_PHOTONS = 1_500_000    # the large photon map of the store rate (about 4M stored)
+LARGE_MAP_PHOTONS = 1_500_000    # the large photon map (store and emission rates; about 4M stored)
 # The direct-light renders of the camera and shadow-ray rates: at 160 x 120 their camera stages
 # took 0.06 and 0.16 s, and two calibrations four hours apart put the shadow ray at 0.125 and
 # 0.075 us; at 320 x 240 they take 0.2 and 0.6 s, and the camera stage's own fixed cost (about
@@ -268,10 +268,11 @@ def _nonnegative_fit(rows, values, floor=0.0):
     return tuple(float(max(c, floor)) for c in costs)
 
 
-def _large_map_store(workers, tell, repeat=REPEAT) -> dict:
-    """The photon map's build (concatenation, Morton reorder, kd-tree) per stored photon at a
-    preset's size: ``LARGE_MAP_PHOTONS`` photons in the calibration room (about 4M stored),
-    the fastest of ``repeat`` passes; ``STORE_KEYS``' large pair."""
+def _large_map(workers, tell, repeat=REPEAT) -> tuple[dict, float]:
+    """A photon map at a preset's size: ``LARGE_MAP_PHOTONS`` photons in the calibration room
+    (about 4M stored), ``repeat`` passes. Returns (``STORE_KEYS``' large pair: the build, i.e.
+    concatenation, Morton reorder and kd-tree, per stored photon; the emission's seconds),
+    each the fastest pass's."""
     from concurrent.futures import ThreadPoolExecutor
 
     from ..accel import Accelerator
@@ -293,8 +294,8 @@ def _large_map_store(workers, tell, repeat=REPEAT) -> dict:
     finally:
         accel.close()
     stored = stats["stored_all"]
-    return {"stored_large": float(stored), "store_large": max(best, 1e-12) / max(stored, 1),
-            "emit_seconds": float(emit), "emitted": float(LARGE_MAP_PHOTONS)}
+    return ({"stored_large": float(stored), "store_large": max(best, 1e-12) / max(stored, 1)},
+            float(emit))
 
 
 def measure_rates(threads=0, tell=print, repeat=REPEAT) -> est.Rates:
@@ -378,17 +379,16 @@ def measure_rates(threads=0, tell=print, repeat=REPEAT) -> est.Rates:
         sums["lookup"] += max(cam["seconds"] - direct_part(cam) - cam["gather_rays"]
                               * r["gather_ray"] - cam["gather_points"] * r["gather_point"], 0.0)
         sums["interpolated"] += cam["cache_interpolated"] + cam["cache_local_interpolated"]
-    store = {"stored_small": sums["stored"] / len(cameras)}
-    large = _large_map_store(workers, tell, repeat)
+    large, large_emit = _large_map(workers, tell, repeat)
     # Emission pooled over the cache renders and the large map (its fastest pass), so that it
     # is measured at a preset's size too (1M photons at ``final``; 300k-photon runs alone gave
     # 0.19 and 0.34 us a photon in two calibrations).
-    r["photon_emit"] = max(tiny, (sums["emit"] + large.pop("emit_seconds"))
-                           / (sums["emitted"] + large.pop("emitted")))
+    r["photon_emit"] = max(tiny, (sums["emit"] + large_emit)
+                           / (sums["emitted"] + LARGE_MAP_PHOTONS))
     r["photon_ray"] = max(tiny, sums["trace"] / sums["rays"])
     r["photon_store"] = max(tiny, sums["store"] / sums["stored"])
-    store["store_small"] = r["photon_store"]
-    store.update(large)
+    store = {"stored_small": sums["stored"] / len(cameras), "store_small": r["photon_store"],
+             **large}
     r["radiance_estimate"] = max(tiny, sums["est"] / sums["estimates"])
     r["cache_lookup"] = max(tiny, sums["lookup"] / max(sums["interpolated"], 1))
 
