@@ -37,7 +37,8 @@ the cache is placed over it, so a tile (render border) renders as its part of th
     photon rays            N (1 + c rho_1 sum_{i=0..n-1} (c rho)^i): a Russian-roulette path
                            (seed 9.2) hits something with probability c and survives a hit
                            with probability rho, the area-weighted mean of the materials'
-                           channel-averaged P_d + P_s (rho_1 at the first hit: the mean over
+                           roulette P_d + P_s (``photons.roulette_probabilities``: the
+                           reflectances' largest channels; rho_1 at the first hit: the mean over
                            triangles weighted by the solid angle each subtends at the point,
                            spot or area lights, occlusion ignored), for at most n =
                            ``bounces`` bounces. c, the closure, is the share of the faces of
@@ -135,27 +136,32 @@ Memory [bytes] (keeps: held until the render ends; working: while the stage runs
 Rates files (JSON, ``RATES_SCHEMA``)
     ``engine/data/rates.json`` ships with Lanterna (measured on the development machine);
     ``lanterna bench --calibrate`` measures this machine's and writes the user file
-    ``$XDG_CACHE_HOME/lanterna/rates.json`` (or ``~/.cache/lanterna/rates.json``), which
+    ``user_rates_path()``: ``$XDG_CACHE_HOME/lanterna/rates.json`` (or
+    ``~/.cache/lanterna/rates.json``; ``%LOCALAPPDATA%\\lanterna`` on Windows,
+    ``~/Library/Caches/lanterna`` on macOS), which
     ``load_rates`` prefers. A user file that cannot be read, is not JSON or lacks a rate
     gives a warning (``Rates.warnings``, copied into the estimate and the render report) and
     the shipped defaults are used (missing rates alone are taken from the defaults).
 
 Available memory
-    ``available_memory()``: ``MemAvailable`` from ``/proc/meminfo``, else
-    ``os.sysconf`` free pages (``psutil`` is not a dependency and not installed here);
-    None where neither exists (then nothing is refused).
+    ``available_memory()`` (``engine/memory.py``): ``MemAvailable`` of ``/proc/meminfo``,
+    ``GlobalMemoryStatusEx`` on Windows, else ``os.sysconf`` free pages; None where none
+    answers (then nothing is refused).
 """
 from __future__ import annotations
 
 import json
 import math
 import os
+import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
+
+from .memory import available_memory
 
 RATES_SCHEMA = 1
 DEFAULT_RATES_PATH = Path(__file__).resolve().parent / "data" / "rates.json"
@@ -280,10 +286,18 @@ class Rates:
                    measured=str(data.get("measured", "")), source=source)
 
 
-def user_rates_path() -> Path:
-    """Where ``lanterna bench --calibrate`` writes this machine's rates."""
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "lanterna" / "rates.json"
+def user_rates_path(platform: str | None = None) -> Path:
+    """Where ``lanterna bench --calibrate`` writes this machine's rates: the user's cache
+    folder as each platform names it."""
+    platform = sys.platform if platform is None else platform
+    home = Path(os.path.expanduser("~"))
+    if platform == "win32":
+        base = Path(os.environ.get("LOCALAPPDATA") or home / "AppData" / "Local")
+    elif platform == "darwin":
+        base = home / "Library" / "Caches"
+    else:
+        base = Path(os.environ.get("XDG_CACHE_HOME") or home / ".cache")
+    return base / "lanterna" / "rates.json"
 
 
 def read_rates(path, partial: bool = False) -> Rates:
@@ -363,23 +377,6 @@ def save_rates(rates: Rates, path=None) -> Path:
         if tmp.exists():
             tmp.unlink()
     return path
-
-
-# -- Available memory -------------------------------------------------------------------------
-def available_memory() -> int | None:
-    """Bytes of memory available to a new allocation: ``MemAvailable`` of /proc/meminfo,
-    else free physical pages by ``os.sysconf``; None when unknown."""
-    try:
-        with open("/proc/meminfo", encoding="ascii") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
-    except (ValueError, OSError, AttributeError):
-        return None
 
 
 # -- What the estimate needs from a scene ------------------------------------------------------
@@ -522,7 +519,8 @@ def scene_facts(scene) -> SceneFacts:
     # (Bad values are the validate stage's to name: here they only must not poison counts.)
     diffuse = np.clip(np.nan_to_num(table["diffuse"].astype(np.float64)), 0, 1).reshape(-1, 3)
     specular = np.clip(np.nan_to_num(table["specular"].astype(np.float64)), 0, 1).reshape(-1, 3)
-    p_d, p_s = diffuse.mean(axis=1), specular.mean(axis=1)
+    from .photons import roulette_probabilities
+    p_d, p_s = roulette_probabilities(diffuse, specular)
     if total > 0 and len(p_d):
         share = area_m[:len(p_d)] / total
         survival = float(np.clip((share * (p_d + p_s)).sum(), 0.0, 1.0))

@@ -10,9 +10,10 @@ What it computes (seed sections 9.1-9.5, corrections in DESIGN.md §4)
         area-uniform points, cosine directions, 9.1.3) and a constant world (a uniform
         direction and a point on a disk covering the scene).
     ``trace_photons(scene, accel, emitted, rng)``  all photons advance together through
-        Embree; at each hit Russian roulette (9.2) with the channel-averaged reflectances
-        Pd, Ps chooses diffuse / specular / absorb and scales the survivor's RGB power by
-        rho / P per channel, so colour stays unbiased. Photons are stored at diffuse hits.
+        Embree; at each hit Russian roulette (9.2) with Pd, Ps the largest channels of the
+        reflectances (``roulette_probabilities``) chooses diffuse / specular / absorb and
+        scales the survivor's RGB power by rho / P per channel, so colour stays unbiased and
+        no channel's power grows. Photons are stored at diffuse hits.
         ``max_bounces`` caps the path so a white (rho = 1) enclosure ends. Bookkeeping per
         RGB channel: emitted = absorbed + escaped + capped in expectation, where absorbed
         adds (1 - rho_d - rho_s) x the power of every hit.
@@ -399,8 +400,25 @@ class PhotonMap:
         return flux
 
 
+def roulette_probabilities(rho_d: np.ndarray, rho_s: np.ndarray):
+    """Russian roulette's probabilities (P_d, P_s) per material from the diffuse and specular
+    reflectances (M, 3): each the largest channel of its reflectance, both scaled by
+    1 / (P_d + P_s) where that sum exceeds 1 (DESIGN.md §4). A survivor's power is scaled by
+    rho / P per channel, so no channel's weight grows (rho_c <= max rho = P). The seed's
+    channel-averaged P let a channel grow: rho = (0.9, 0.6, 0.3) gave P = 0.6 and red x1.5 a
+    bounce, a red variance series in 1.5^2 x 0.6 = 1.35 a bounce, which diverges."""
+    p_d = np.max(rho_d, axis=1) if len(rho_d) else np.zeros(0)
+    p_s = np.max(rho_s, axis=1) if len(rho_s) else np.zeros(0)
+    total = p_d + p_s
+    over = total > 1.0
+    if over.any():
+        p_d = np.where(over, p_d / np.where(over, total, 1.0), p_d)
+        p_s = np.where(over, p_s / np.where(over, total, 1.0), p_s)
+    return p_d, p_s
+
+
 def trace_photons(scene: Scene, accel, emitted: EmittedPhotons, rng: np.random.Generator,
-                  max_bounces: int = 64, ray_log: list | None = None,
+                  max_bounces: int = 128, ray_log: list | None = None,
                   geometric_normals: np.ndarray | None = None) -> PhotonMap:
     """Trace emitted photons (Russian roulette, 9.2) and store them at diffuse hits.
 
@@ -412,11 +430,11 @@ def trace_photons(scene: Scene, accel, emitted: EmittedPhotons, rng: np.random.G
     table = scene.material_table()
     rho_d = table["diffuse"].astype(np.float64)
     rho_s = table["specular"].astype(np.float64)
-    p_d = rho_d.mean(axis=1)
-    p_s = rho_s.mean(axis=1)
+    p_d, p_s = roulette_probabilities(rho_d, rho_s)
     p_ds = p_d + p_s
     absorb = np.clip(1.0 - rho_d - rho_s, 0.0, 1.0)
-    # Survivors' power scale per material: rho / P per channel (colour stays unbiased).
+    # Survivors' power scale per material: rho / P per channel (colour stays unbiased, and
+    # no channel's weight exceeds 1 where P_d + P_s <= 1).
     scale_d = rho_d / np.where(p_d > 0, p_d, 1.0)[:, None]
     scale_s = rho_s / np.where(p_s > 0, p_s, 1.0)[:, None]
     normals_geo = (scene.geometric_normals() if geometric_normals is None
@@ -463,7 +481,7 @@ def trace_photons(scene: Scene, accel, emitted: EmittedPhotons, rng: np.random.G
             stored["incoming"].append(d[sel].astype(np.float16))
             stored["normals"].append(n[sel].astype(np.float16))
             stored["bounces"].append(np.minimum(depth[sel], 255).astype(np.uint8))
-        # Russian roulette with channel-averaged reflectances.
+        # Russian roulette with the reflectances' largest channels.
         xi = rng.random(len(o))
         go_diffuse = xi < p_d[mat]
         alive = xi < p_ds[mat]
@@ -568,7 +586,7 @@ def _concatenate(maps: list) -> PhotonMap:
     return out
 
 
-def build_photon_map(scene: Scene, accel, count: int, seed: int = 0, max_bounces: int = 64,
+def build_photon_map(scene: Scene, accel, count: int, seed: int = 0, max_bounces: int = 128,
                      keep: str = "all", library: str = "pykdtree", workers: int = 1,
                      pool=None, progress=None, cancelled=None, ray_log: list | None = None) -> PhotonMap:
     """Emit ``count`` photons, trace them in chunks of ``PHOTON_CHUNK`` on ``pool`` (or a new

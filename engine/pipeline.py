@@ -44,8 +44,10 @@ Settings (``RenderSettings``)
     mode                   full      ``full`` (direct + photon-map indirect) or ``photon-map``
     samples                16        camera samples per pixel
     light_samples          4         samples per shading point shared by area/mesh/world lights
-    bounces                64        most bounces of light; 0 = direct light only. Photon paths
-                                     end after this many bounces (counted in the report)
+    bounces                128       most bounces of light; 0 = direct light only. Photon paths
+                                     end after this many bounces (counted in the report); 128
+                                     keeps a rho = 0.95 enclosure within 0.2 % (0.95^130; 64
+                                     left it 3.4 % dark)
     photons                0         photons emitted; 0 = automatic: 2 per pixel, 200k-2M
     photon_k               50        photons per estimate (k nearest, Eq. 9.11)
     photon_radius          0.0       cap on the estimate's radius [m]; 0 = automatic (4x the
@@ -79,7 +81,6 @@ Settings (``RenderSettings``)
 from __future__ import annotations
 
 import os
-import resource
 import time
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from dataclasses import asdict, dataclass, field, replace
@@ -91,6 +92,7 @@ from .accel import Accelerator
 from .camera import pixel_rays
 from .direct import direct_terms, irradiance_from_terms
 from .lights import LightSet
+from .memory import peak_memory
 from .gather import RadianceEstimates, final_gather
 from .photons import auto_max_radius, auto_photon_count, build_photon_map
 from .plan import make_plan
@@ -125,7 +127,7 @@ class RenderSettings:
     mode: str = "full"
     samples: int = 16
     light_samples: int = 4
-    bounces: int = 64
+    bounces: int = 128
     seed: int = 0
     threads: int = 0
     filter_width: float = 1.5
@@ -1085,7 +1087,7 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
                        "extent_m": scene.extent, "lights": lights.describe(),
                        "resolution": list(scene.camera.resolution), "window": list(scene.camera.border)}
     report["total_seconds"] = round(time.perf_counter() - prep.total_start, 6)
-    report["peak_memory_mb"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1)
+    report.update(peak_memory().to_report())
     report["cancelled"] = was_cancelled
     artifacts_out = _artifacts_of(prep, scene, settings)
     accel.close()

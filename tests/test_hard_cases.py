@@ -797,7 +797,7 @@ def test_white_enclosure_with_rho_one_is_bounded():
     low (the disc of the estimate is cut at the box's edges in view), SD 1.1 %; bound 5 %.
     Time and memory are bounded, checked as counts: photon rays = emitted + inward x B exactly
     (the outward half escape at once), stored = inward x (B + 1), at most 40 bytes a
-    stored photon, every inward path capped and reported; with the default B = 64 too."""
+    stored photon, every inward path capped and reported; with B = 64 too."""
     m_exit = 2.0
     camera = Camera.look_at([1, 0.2, 1], [1, 2, 1], resolution=(16, 12))
     for bounces, modes in ((8, (("photon-map", "cache"), ("full", "photon-map"))),

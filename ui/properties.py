@@ -71,7 +71,7 @@ class LanternaSceneSettings(bpy.types.PropertyGroup):
         name="Max Bounces",
         description=("Most bounces of light between surfaces (0 = direct light only); photon "
                      "paths end after this many"),
-        default=64, min=0, max=255, soft_max=64, subtype='NONE',
+        default=128, min=0, max=255, soft_max=128, subtype='NONE',
     )
     photons: IntProperty(
         name="Photons",

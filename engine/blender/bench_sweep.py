@@ -68,8 +68,8 @@ Each point's figures
                   the render: exact and free, same process, so timings stay warm (a fresh
                   process per point would pay bpy's import and a cold first render each
                   time). Where that file cannot be written, a thread samples the resident
-                  size every 5 ms (``sampled``); without ``/proc``, ``ru_maxrss``
-                  (process-wide). The method is in the JSON. Not measured for Cycles.
+                  size every 5 ms (``sampled``); without ``/proc``, the process-wide peak
+                  of ``engine/memory.py`` (its platform's unit; None where unknown). The method is in the JSON. Not measured for Cycles.
     rel_rmse      sqrt(mean((img - ref)^2)) / mean(ref), all pixels and channels
                   (``bench_cycles.errors``).
     rel_rmse_corrected  sqrt(max(MSE - v, 0)) / mean(ref), v the reference's own per-pixel
@@ -143,6 +143,7 @@ import numpy as np
 from .bench_cycles import (CACHE_DIR, CYCLES_SEED, DEFAULT_REFERENCE_SAMPLES, LANTERNA_SEED,
                            SCENE_TITLES, STORED_REFERENCES, STORED_RESOLUTION, BenchError,
                            _int_list, _log, _Parser, _resolution)
+from ..memory import peak_memory
 
 PROG = "lanterna bench --sweep"
 DEFAULT_SCENES = ("scene1", "scene2")
@@ -274,11 +275,10 @@ def _status_kb(field: str) -> int | None:
 
 
 def _cpu_seconds() -> float:
-    """User + system CPU seconds of this process so far (all its threads)."""
-    import resource
-
-    usage = resource.getrusage(resource.RUSAGE_SELF)
-    return usage.ru_utime + usage.ru_stime
+    """User + system CPU seconds of this process so far (all its threads; ``os.times`` has
+    them on every platform, ``resource`` only on POSIX)."""
+    times = os.times()
+    return times.user + times.system
 
 
 def _resident_mb() -> float | None:
@@ -343,11 +343,12 @@ class PeakMemory:
                 thread.join()
             out["peak_rss_mb"] = max(peak[0], _resident_mb() or 0.0)
         else:
-            import resource
             yield out
-            out["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+            # The process's peak in the platform's own unit (engine/memory.py), None where
+            # the platform cannot tell.
+            out["peak_rss_mb"] = peak_memory().megabytes
         start = out["rss_start_mb"]
-        out["peak_above_start_mb"] = (None if start is None
+        out["peak_above_start_mb"] = (None if start is None or out["peak_rss_mb"] is None
                                       else max(out["peak_rss_mb"] - start, 0.0))
 
 

@@ -53,7 +53,6 @@ import argparse
 import contextlib
 import json
 import os
-import resource
 import signal
 import sys
 import time
@@ -402,11 +401,6 @@ def _sigint_flag():
             signal.signal(signal.SIGINT, previous)
 
 
-def _peak_memory_mb() -> float:
-    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    return rss / (1024.0 * 1024.0) if sys.platform == "darwin" else rss / 1024.0
-
-
 def _full_frame(image, scene_camera, crop: bool):
     """Place the border window into the full frame (zeros outside) unless cropping."""
     import numpy as np
@@ -445,6 +439,7 @@ def cmd_render(args) -> int:
     import bpy  # noqa: F401  (slow import, only now)
     from ..scene import SceneError
     from .. import imageio, pipeline
+    from ..memory import peak_memory
     from . import export, seed_scenes
 
     _ensure_registered()
@@ -531,7 +526,7 @@ def cmd_render(args) -> int:
             report_tmp = stack.enter_context(imageio.atomic_output(outputs["report"]))
             report["time"]["write_seconds"] = time.perf_counter() - t0
             report["time"]["total_seconds"] = time.perf_counter() - started
-            report["peak_memory_mb"] = _peak_memory_mb()
+            report.update(peak_memory().to_report())
             with open(report_tmp, "w", encoding="utf-8") as f:
                 json.dump(_plain(report), f, indent=2, allow_nan=False)
                 f.write("\n")
