@@ -12,7 +12,8 @@ BPY_42 := 4.2.23
 BPY_45 := 4.5.15
 COMPAT_TESTS := tests/test_blender_engine.py tests/test_ui.py tests/test_export.py \
                 tests/test_cli.py tests/test_ase.py tests/test_overlay.py \
-                tests/test_extension.py tests/test_farm.py
+                tests/test_extension.py tests/test_farm.py tests/test_settings.py \
+                tests/test_portability.py
 
 $(STAMP): pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)

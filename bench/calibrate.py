@@ -34,20 +34,8 @@ What it computes (``lanterna bench --calibrate`` / ``lanterna bench --check-esti
     cores during the renders (``LoadMeter``) and the per-stage times. A benchmark, not a
     test: the machine is shared, so this is a printout, never an assertion.
 
-    ``panel_estimate(context)``: the estimate the render panel shows (``ui/panels.py``,
-    ``LANTERNA_RENDER_PT_estimate``). The scene's facts (``estimate.scene_facts``) need an
-    export, too slow to repeat on every redraw of a big scene, so they are cached under a cheap
-    signature of the depsgraph (per evaluated object: name, type, polygon and vertex counts,
-    materials; per light: type, power, size, flags; the world; the camera and its lens); the
-    estimate itself
-    is recomputed from the cached facts on every redraw (arithmetic), so changes of the
-    settings and the resolution show at once. A scene whose signature changed is exported again
-    when it has at most ``LIVE_EXPORT_TRIANGLES`` polygons; a bigger one keeps its older facts,
-    marked as such, or takes the facts of the last F12 render (its report's estimate), or,
-    with neither, says how to get an estimate (``lanterna render SCENE.blend --dry-run``).
-
 Every measurement and every checked render runs ``--repeat`` times (default 2) and the
-fastest run counts, as in ``bench.py``: on a shared machine it is the one least disturbed.
+fastest run counts, as in ``bench/main.py``: on a shared machine it is the one least disturbed.
 
 Parameters
     ``--rates-file PATH``, ``--threads N`` (0 = all cores), ``--check-resolutions LIST``
@@ -64,9 +52,8 @@ import time
 
 import numpy as np
 
-from .. import estimate as est
+from ..engine import estimate as est
 
-LIVE_EXPORT_TRIANGLES = 200_000
 PASS_FACTOR = 1.5
 REPEAT = 2                       # runs of each measurement and each check; the fastest counts
 LARGE_MAP_PHOTONS = 1_500_000    # the large photon map (store and emission rates; about 4M stored)
@@ -118,7 +105,7 @@ def _icosphere(radius, subdivisions, center):
 def calibration_scene(resolution=(160, 120), lights="point"):
     """The calibration room: ``lights`` = ``point`` (one point light), ``points4`` (four) or
     ``area`` (a 1 m square area light under the ceiling)."""
-    from ..scene import AreaLight, Camera, Material, PointLight, Scene
+    from ..engine.scene import AreaLight, Camera, Material, PointLight, Scene
 
     room = _box((0, 0, 0), (5, 4, 3))
     box = _box((0.6, 2.2, 0.0), (1.6, 3.2, 1.2))
@@ -186,7 +173,7 @@ class LoadMeter:
 
 
 def _raw_seconds_per_ray(triangles, origins, directions, workers, repeat=3):
-    from .bench import raw_embree_seconds
+    from .raw_embree import raw_embree_seconds
 
     step = 1 << 16
     log = [("camera", origins[a:a + step], directions[a:a + step], None)
@@ -198,10 +185,10 @@ def _raw_seconds_per_ray(triangles, origins, directions, workers, repeat=3):
 def _raw_rays(workers, tell):
     """Raw embreex seconds per ray (coherent, incoherent) on the calibration scene and the
     250k grid; BVH build and validate rates from the grid."""
-    from .. import sampling
-    from ..accel import Accelerator
-    from ..camera import pixel_rays
-    from ..scene import Camera, Material, Scene
+    from ..engine import sampling
+    from ..engine.accel import Accelerator
+    from ..engine.camera import pixel_rays
+    from ..engine.scene import Camera, Material, Scene
 
     out = {}
     rng = np.random.default_rng(1)
@@ -250,7 +237,7 @@ def _fastest(reports) -> dict:
 
 
 def _render(scene, tell, label, repeat=REPEAT, **settings):
-    from ..pipeline import RenderSettings, render
+    from ..engine.pipeline import RenderSettings, render
 
     tell(label)
     s = RenderSettings(**{"seed": 1, **settings})
@@ -275,8 +262,8 @@ def _large_map(workers, tell, repeat=REPEAT) -> tuple[dict, float]:
     each the fastest pass's."""
     from concurrent.futures import ThreadPoolExecutor
 
-    from ..accel import Accelerator
-    from ..photons import build_photon_map
+    from ..engine.accel import Accelerator
+    from ..engine.photons import build_photon_map
 
     scene = calibration_scene((160, 120))
     accel = Accelerator(scene.triangles, threads=1)
@@ -303,7 +290,7 @@ def measure_rates(threads=0, tell=print, repeat=REPEAT) -> est.Rates:
     render ``repeat`` times, the fastest counting."""
     from functools import partial
 
-    from ..pipeline import RenderSettings
+    from ..engine.settings import RenderSettings
 
     workers = RenderSettings(threads=threads).worker_count
     run = partial(_render, repeat=repeat)
@@ -432,9 +419,9 @@ def check_estimates(resolutions=((160, 120), (640, 480)), scenes=("scene1", "sce
     stage."""
     import bpy
 
-    from . import seed_scenes
-    from .export import export_scene
-    from ..pipeline import RenderSettings, render
+    from ..engine.blender import seed_scenes
+    from ..engine.blender.export import export_scene
+    from ..engine.pipeline import RenderSettings, render
 
     rows = []
     for name in scenes:
@@ -521,7 +508,7 @@ def main(argv=None) -> int:
                              f"(default {REPEAT})")
     parser.add_argument("--json", default=None)
     args = parser.parse_args(argv)
-    from .. import imageio
+    from ..engine import imageio
 
     if args.json and (problem := imageio.output_problem(args.json)):
         print(f"lanterna: error: --json {args.json}: {problem}", file=sys.stderr)
@@ -562,89 +549,6 @@ def main(argv=None) -> int:
     if not ok:
         print("(a benchmark on a shared machine: a FAIL is a finding to look into, not an error)")
     return 0
-
-
-# -- The render panel's estimate (ui/panels.py) -----------------------------------------------
-_PANEL_CACHE: dict = {}
-
-
-def _signature(depsgraph, bscene) -> tuple:
-    """A cheap key of what the facts depend on (module docstring)."""
-    items = []
-    polygons = 0
-    for obj in depsgraph.objects:
-        row = [obj.name, obj.type]
-        data = getattr(obj, "data", None)
-        if obj.type == 'MESH' and data is not None:
-            polygons += len(data.polygons)
-            row += [len(data.polygons), len(data.vertices),
-                    tuple(m.name if m else "" for m in data.materials)]
-        elif obj.type == 'LIGHT' and data is not None:
-            row += [data.type, round(float(data.energy), 6), tuple(data.color),
-                    round(float(getattr(data, "size", 0.0)), 6),
-                    round(float(getattr(data, "size_y", 0.0)), 6),
-                    round(float(getattr(data, "angle", 0.0)), 6),
-                    round(float(getattr(data, "spread", 0.0)), 6),
-                    bool(getattr(getattr(data, "lanterna", None), "shadow_photons", True))]
-        items.append(tuple(row))
-    world = bscene.world
-    wkey = world.name_full if world is not None else ""
-    camera = bscene.camera
-    cam = ((camera.name, round(float(getattr(camera.data, "lens", 0.0)), 6),
-            round(float(getattr(camera.data, "sensor_width", 0.0)), 6))
-           if camera is not None else "")
-    return tuple(sorted(items)), polygons, wkey, cam, bscene.name
-
-
-def _last_render_facts():
-    """The facts of the last F12 render (its report's estimate), or None."""
-    from .render_engine import LAST_RENDER
-
-    facts = (((LAST_RENDER or {}).get("report") or {}).get("estimate") or {}).get("facts")
-    try:
-        return est.SceneFacts.from_dict(facts) if facts else None
-    except (KeyError, TypeError, ValueError):
-        return None
-
-
-def panel_estimate(context):
-    """(estimate or None, note) for the render panel; never raises."""
-    try:
-        import bpy
-
-        from .export import export_scene, export_settings, render_border, render_resolution
-
-        bscene = context.scene
-        depsgraph = bpy.context.evaluated_depsgraph_get()
-        key = _signature(depsgraph, bscene)
-        cached = _PANEL_CACHE.get(bscene.name)
-        note = ""
-        if cached is None or cached[0] != key:
-            if key[1] <= LIVE_EXPORT_TRIANGLES:
-                scene = export_scene(depsgraph)
-                facts = est.scene_facts(scene)
-                _PANEL_CACHE[bscene.name] = (key, facts)
-            elif cached is not None:
-                facts = cached[1]
-                note = (f"The scene changed since its facts were taken (over "
-                        f"{LIVE_EXPORT_TRIANGLES:,} polygons: not exported while drawing)")
-            else:
-                facts = _last_render_facts()
-                if facts is None:
-                    return None, (f"The scene has over {LIVE_EXPORT_TRIANGLES:,} polygons: "
-                                  "render once, or 'lanterna render SCENE.blend --dry-run'")
-                note = "Scene facts from the last render"
-        else:
-            facts = cached[1]
-        resolution = render_resolution(bscene.render)
-        border = render_border(bscene.render, resolution) or (0, 0, *resolution)
-        facts = est.SceneFacts(**{**facts.__dict__, "frame": tuple(resolution),
-                                  "border": tuple(border),
-                                  "window": (border[2] - border[0], border[3] - border[1])})
-        settings = export_settings(bscene)
-        return est.estimate_from_facts(facts, settings, available=est.available_memory()), note
-    except Exception as exc:   # a panel must draw whatever happens
-        return None, f"No estimate: {type(exc).__name__}: {exc}"
 
 
 if __name__ == "__main__":

@@ -32,32 +32,12 @@ What it computes
     scene) is 39 for Scene 1, 304 for Scene 2, 29 for the room and 1049 for the plate.
     Counts do not depend on the machine's speed, so the fit can run on a busy machine.
 
-Pilots (``--pilots``): can a cheap run before the render foresee the records? For every case,
-on a map of ``PILOT_PHOTONS`` photons (the first passes' counts come out within a few records
-of the full map's), two pilots:
-    passes   the first three placement passes (strides 32, 16, 8) with the render's gather,
-             plus the count of stride-4 points they leave uncovered (pass 4's records, known
-             without its gathers): K records known; then the least-squares fit
-             ln(records) = p0 + p1 ln K + p2 ln a over the seed scenes, with leave-one-out.
-    windows  the whole placement restricted to ``WINDOW_SHARE`` of the frame (a centred window
-             in each cell of a 4 x 4 grid, 2 x 2 below 240 pixels), each record weighed by
-             the share of its reach's disc inside the windows, over that share.
-Measured 2026-12-02, before the refill (``--pilots``, this tool's eight seed renders and six
-rooms):
-    passes   0.73-1.44 of the records (0.59-1.81 left out; the F, a fit: 0.71-1.41), rooms
-             0.22-1.17; Scene 1 and Scene 2 at 640 x 480, ``final``: 0.88 and 1.09 (the F, a
-             fit 0.74 and 1.35), but at 160 x 120, ``final``: 0.73 and 1.43, as the F, a fit;
-             2.6-3.2 s at 640 x 480, ``final``, on top of a 100k-photon map (0.5-1 s).
-    windows  0.52-1.54 (640 x 480, ``final``: 1.09 and 1.04), rooms 0.01-1.78 (the plate under
-             the spot falls outside the windows); 3.5-6.1 s at 640 x 480, ``final``: 25-30 %
-             of the placement itself.
-Neither is worth its cost as a forecast: the check's growth happens in the last passes
-(Scene 2 at 320 x 240, ``preview``: 291 records at stride 2, then 4,027 at stride 1), which
-only placing them shows.
+(A study of two pilots that were to foresee the records before the render, ``--pilots``,
+found neither worth its cost and was removed; its figures are in the commit that removed it.)
 
 Usage (from the repository root, with the project's virtualenv)::
 
-    .venv/bin/python tools/fit_cache_counts.py [--json FILE] [--pilots]
+    .venv/bin/python -m lanterna.bench.fit_cache_counts [--json FILE]
 
 Prints one line per render and the fitted constants to paste into ``engine/estimate.py``.
 """
@@ -70,7 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parent.parent      # the checkout (bench/ lies in it)
 sys.path.insert(0, str(ROOT / "tests"))
 
 
@@ -107,7 +87,7 @@ def rooms(fov):
 
 
 def cases():
-    from lanterna.engine.pipeline import PRESETS
+    from lanterna.engine.settings import PRESETS
 
     for name in ("scene1", "scene2"):
         for res in ((160, 120), (640, 480)):
@@ -122,7 +102,7 @@ def cases():
             yield label, scene, dict(photons=300_000, gather_m=8, gather_n=32, cache_error=0.2)
 
 
-def measure(with_pilots=False):
+def measure():
     from lanterna.engine.pipeline import RenderSettings, render
 
     rows = []
@@ -138,92 +118,11 @@ def measure(with_pilots=False):
                "records": result.report["stages"]["irradiance_cache"]["records"],
                "records_without_check": plain.report["stages"]["irradiance_cache"]["records"],
                "uncovered": cam["cache_gathered"] / max(lookups, 1)}
-        if with_pilots:
-            row.update(pilots(scene, settings))
         rows.append(row)
         print(f"  {label:<26} records {row['records']:>6} ({row['records_without_check']:>6} "
               f"without the check, x{row['records'] / max(row['records_without_check'], 1):.2f})"
               f"  uncovered {row['uncovered']:.4f}", flush=True)
     return rows
-
-
-PILOT_PHOTONS = 100_000
-WINDOW_SHARE = 0.25
-
-
-def pilots(scene, settings_dict) -> dict:
-    """The two pilots of the module docstring for one case: known records K (passes pilot),
-    and the windows pilot's weighted record count over the whole frame."""
-    import time
-    from dataclasses import replace
-
-    from lanterna.engine import pipeline as P
-
-    settings = P.RenderSettings(samples=16, seed=1, light_samples=1, **settings_dict).resolved()
-    # The pipeline's own stages 1-6 on a small map: with indirect="gather" they end at the
-    # final gather the placement passes use, and place no cache.
-    prep = P._prepare(scene, replace(settings, photons=PILOT_PHOTONS, indirect="gather"),
-                      None, None, None)
-    accel, arrays, pool, gather = prep.accel, prep.arrays, prep.pool, prep.photon
-    a = settings.cache_error
-    quiet = lambda *args: None                                     # noqa: E731
-    t0 = time.perf_counter()
-    cache, _stats = P._cache_prepass(scene, accel, arrays, gather, settings, pool, quiet, None,
-                                     strides=(32, 16, 8))
-    cam = scene.camera
-    w, h = cam.window_size
-    hits = P._centre_hits(scene, accel, arrays)
-    row, col = np.divmod(hits.pixel[hits.diffuse], w)
-    on4 = (row % 4 == 0) & (col % 4 == 0)
-    _e, covered, _w, _c = cache.interpolate(hits.x[hits.diffuse][on4],
-                                            hits.ns[hits.diffuse][on4], a, count_usage=False)
-    known = len(cache) + int((~covered).sum())
-    passes_seconds = time.perf_counter() - t0
-
-    cells = 4 if min(w, h) >= 240 else 2
-    cw, ch = w / cells, h / cells
-    ww, wh = (max(1, int(round(v * np.sqrt(WINDOW_SHARE)))) for v in (cw, ch))
-    mask = np.zeros((h, w), bool)
-    for i in range(cells):
-        for j in range(cells):
-            x0, y0 = int(round(j * cw + (cw - ww) / 2)), int(round(i * ch + (ch - wh) / 2))
-            mask[y0:y0 + wh, x0:x0 + ww] = True
-    t0 = time.perf_counter()
-    cache, stats = P._cache_prepass(scene, accel, arrays, gather, settings, pool, quiet, None,
-                                    pixel_mask=mask)
-    window_seconds = time.perf_counter() - t0
-    reach = a * cache.radius / stats["record_footprint"]       # pixels
-    py, px = np.divmod(stats["record_pixels"], w)
-    ring = np.sqrt((np.arange(4) + 0.5) / 4)
-    turn = np.linspace(0, 2 * np.pi, 16, endpoint=False)
-    disc = np.array([(r * np.cos(q), r * np.sin(q)) for r in ring for q in turn])
-    sx = px[:, None] + 0.5 + reach[:, None] * disc[None, :, 0]
-    sy = py[:, None] + 0.5 + reach[:, None] * disc[None, :, 1]
-    # a disc sample counts where it falls on a window pixel of the mask
-    in_frame = (sx >= 0) & (sx < w) & (sy >= 0) & (sy < h)
-    inside = np.zeros(sx.shape, bool)
-    inside[in_frame] = mask[sy[in_frame].astype(np.int64), sx[in_frame].astype(np.int64)]
-    prep.close()
-    return {"pilot_known": known, "pilot_passes_seconds": passes_seconds,
-            "pilot_windows": float(inside.mean(axis=1).sum() / (mask.sum() / (w * h))),
-            "pilot_windows_seconds": window_seconds}
-
-
-def pilot_fit(rows):
-    """ln(records) = p0 + p1 ln K + p2 ln a over the seed scenes' rows: the constants, each
-    row's measured / fitted ratio, and each seed row's ratio left out of its own fit."""
-    y = np.log([r["records"] for r in rows])
-    X = np.column_stack([np.ones(len(rows)), np.log([r["pilot_known"] for r in rows]),
-                         np.log([r["a"] for r in rows])])
-    seed = np.array([r["case"].startswith("scene") for r in rows])
-    p = np.linalg.lstsq(X[seed], y[seed], rcond=None)[0]
-    loo = {}
-    for i in np.nonzero(seed)[0]:
-        keep = seed.copy()
-        keep[i] = False
-        q = np.linalg.lstsq(X[keep], y[keep], rcond=None)[0]
-        loo[i] = float(np.exp(y[i] - X[i] @ q))
-    return p, np.exp(y - X @ p), loo
 
 
 def fit(rows):
@@ -247,10 +146,8 @@ def fit(rows):
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--json", default=None, help="also write every point and the fit")
-    parser.add_argument("--pilots", action="store_true",
-                        help="also run the two pilots of the module docstring on every case")
     args = parser.parse_args(argv)
-    rows = measure(args.pilots)
+    rows = measure()
     c, u, rr, ur, seed = fit(rows)
     print("\nmeasured / fitted:")
     for row, a, b in zip(rows, rr, ur):
@@ -261,15 +158,6 @@ def main(argv=None) -> int:
           f"{min(rr[~seed]):.2f}-{max(rr[~seed]):.2f}; uncovered share: seed scenes "
           f"{min(ur[seed]):.2f}-{max(ur[seed]):.2f}, rooms {min(ur[~seed]):.2f}-"
           f"{max(ur[~seed]):.2f}")
-    if args.pilots:
-        p, ratio, loo = pilot_fit(rows)
-        print(f"\npilots (ln records = {p[0]:.3f} + {p[1]:.3f} ln K + {p[2]:.3f} ln a):")
-        for i, row in enumerate(rows):
-            left = f" (left out {loo[i]:.2f})" if i in loo else ""
-            print(f"  {row['case']:<26} K {row['pilot_known']:>6}  passes pilot {ratio[i]:5.2f}"
-                  f"{left} in {row['pilot_passes_seconds']:.1f} s;  windows pilot "
-                  f"{row['pilot_windows'] / row['records']:5.2f} in "
-                  f"{row['pilot_windows_seconds']:.1f} s")
     if args.json:
         out = {"rows": rows, "record_fit": c.tolist(), "uncovered_fit": u.tolist()}
         Path(args.json).write_text(json.dumps(out, indent=2))

@@ -140,10 +140,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .bench_cycles import (CACHE_DIR, CYCLES_SEED, DEFAULT_REFERENCE_SAMPLES, LANTERNA_SEED,
+from .vs_cycles import (CACHE_DIR, CYCLES_SEED, DEFAULT_REFERENCE_SAMPLES, LANTERNA_SEED,
                            SCENE_TITLES, STORED_REFERENCES, STORED_RESOLUTION, BenchError,
-                           _int_list, _log, _Parser, _resolution)
-from ..memory import peak_memory
+                           int_list, log, Parser, parse_resolution)
+from ..engine.memory import peak_memory
 
 PROG = "lanterna bench --sweep"
 DEFAULT_SCENES = ("scene1", "scene2")
@@ -391,7 +391,7 @@ def knob_value_of(values: dict, knob: str):
 
 
 def preset_values(name: str) -> dict:
-    from ..pipeline import RenderSettings
+    from ..engine.settings import RenderSettings
 
     settings = RenderSettings(preset=name).resolved()
     return {k: getattr(settings, k) for k in SWEEP_FIELDS}
@@ -399,8 +399,8 @@ def preset_values(name: str) -> dict:
 
 def base_values(spec: str) -> tuple[dict, str]:
     """``--base``: a preset name and/or knob=value items -> (values, description)."""
-    from ..pipeline import PRESETS, RenderSettings
-    from ..scene import SceneError
+    from ..engine.settings import PRESETS, RenderSettings
+    from ..engine.scene import SceneError
 
     items = [s.strip() for s in spec.split(",") if s.strip()]
     names = [s for s in items if "=" not in s]
@@ -498,7 +498,7 @@ def _minutes(seconds: float) -> str:
 def read_reference_exr(path: str, resolution) -> dict:
     """A given reference EXR: channels R, G, B (or a layer's ``*.Combined.R``...), (H, W)
     matching ``resolution``; its noise is unknown."""
-    from .. import imageio
+    from ..engine import imageio
 
     try:
         channels = imageio.read_exr(path)
@@ -536,15 +536,15 @@ def _load_scene(spec: dict, resolution):
     """The bpy scene of ``spec`` (a seed scene or a .blend) at ``resolution``, no border."""
     import bpy
 
-    from .bench_cycles import build_seed_scene
+    from .vs_cycles import build_seed_scene
 
     if spec["blend"] is None:
         bscene = build_seed_scene(spec["name"], resolution)
     else:
-        from .cli import UsageError, _open_blend
+        from ..engine.blender.cli import UsageError, open_blend
 
         try:
-            bscene = _open_blend(spec["blend"])
+            bscene = open_blend(spec["blend"])
         except UsageError as exc:
             raise BenchError(str(exc)) from None
         bscene.render.resolution_x, bscene.render.resolution_y = resolution
@@ -555,7 +555,7 @@ def _load_scene(spec: dict, resolution):
 
 
 def _reference(spec, args, bscene, cycles, tmpdir) -> dict:
-    from .bench_cycles import rendered_reference, stored_reference
+    from .vs_cycles import rendered_reference, stored_reference
 
     if args.reference:
         return read_reference_exr(args.reference, args.resolution)
@@ -587,7 +587,7 @@ def _reference_ready(spec, args) -> bool:
 
 
 def _figures(image, ref: dict) -> dict:
-    from .bench_cycles import errors
+    from .vs_cycles import errors
 
     e = errors(image, ref["image"], ref["variance"])
     dev = np.abs(np.asarray(e["block_ratios"], np.float64) - 1.0)
@@ -603,10 +603,10 @@ def _figures(image, ref: dict) -> dict:
 def sweep_scene(spec: dict, args, cycles, tmpdir, warm: dict, memory: PeakMemory) -> dict:
     import bpy
 
-    from .bench_cycles import cycles_curve
-    from .export import export_scene
-    from ..pipeline import RenderSettings, render
-    from ..scene import SceneError
+    from .vs_cycles import cycles_curve
+    from ..engine.blender.export import export_scene
+    from ..engine.pipeline import RenderSettings, render
+    from ..engine.scene import SceneError
 
     name = spec["name"]
     w, h = args.resolution
@@ -645,7 +645,7 @@ def sweep_scene(spec: dict, args, cycles, tmpdir, warm: dict, memory: PeakMemory
            "points": [], "failures": []}
 
     # Lanterna: one untimed warm-up, then every point (--repeat times, the fastest kept).
-    _log(f"{name}: Lanterna warm-up (preview, not timed) ...")
+    log(f"{name}: Lanterna warm-up (preview, not timed) ...")
     try:
         render(lscene, RenderSettings(preset="preview", seed=LANTERNA_SEED))
     except SceneError as exc:
@@ -653,7 +653,7 @@ def sweep_scene(spec: dict, args, cycles, tmpdir, warm: dict, memory: PeakMemory
                          f"{' '.join(str(exc).split())}") from None
     for index, p in enumerate(points):
         settings = RenderSettings(seed=LANTERNA_SEED, **p["values"])
-        _log(f"{name}: [{index + 1}/{len(points)}] {p['label']} ...")
+        log(f"{name}: [{index + 1}/{len(points)}] {p['label']} ...")
         runs = []                   # (seconds, cpu seconds, report) of each repeat
         try:
             for repeat in range(args.repeat):
@@ -688,7 +688,7 @@ def sweep_scene(spec: dict, args, cycles, tmpdir, warm: dict, memory: PeakMemory
         out["points"].append(row)
         if index == 0 and len(points) > 1:
             left = (len(points) - 1) * sum(run[0] for run in runs) + est["cycles"]
-            _log(f"{name}: the base took {seconds:.1f} s; about {_minutes(left)} left "
+            log(f"{name}: the base took {seconds:.1f} s; about {_minutes(left)} left "
                  f"({len(points) - 1} Lanterna points at about its time, then Cycles)")
 
     # Cycles: the peer curve, same bpy scene, same run.
@@ -799,7 +799,7 @@ def _cell(value):
 
 
 def write_csv(out: dict, path: str) -> None:
-    from .. import imageio
+    from ..engine import imageio
 
     stages = stage_columns(out["points"])
     header = list(CSV_HEAD) + [f"share_{s}" for s in stages] + ["share_other", "settings"]
@@ -815,7 +815,7 @@ def write_csv(out: dict, path: str) -> None:
 
 
 def write_json(data: dict, path: str) -> None:
-    from .. import imageio
+    from ..engine import imageio
 
     imageio.write_json(path, _plain(data), allow_nan=False)
 
@@ -851,7 +851,7 @@ def write_plot(out: dict, path: str, machine: dict) -> None:
     from matplotlib.figure import Figure
     from matplotlib.ticker import FuncFormatter
 
-    from .. import imageio
+    from ..engine import imageio
 
     fig = Figure(figsize=(10, 7))
     FigureCanvasAgg(fig)
@@ -1013,7 +1013,7 @@ def _machine() -> dict:
 
 
 def parse_args(argv):
-    parser = _Parser(prog=PROG, description=__doc__.split("\n\n")[0])
+    parser = Parser(prog=PROG, description=__doc__.split("\n\n")[0])
     parser.add_argument("blend", nargs="?", default=None, metavar="SCENE.blend")
     parser.add_argument("--scenes", default=None)
     parser.add_argument("--resolution", default="160x120")
@@ -1027,14 +1027,14 @@ def parse_args(argv):
     parser.add_argument("--repeat", default="1")
     parser.add_argument("--quick", action="store_true")
     args = parser.parse_args(argv)
-    args.resolution = _resolution(args.resolution)
+    args.resolution = parse_resolution(args.resolution)
     if args.blend and args.scenes:
         raise BenchError("give either SCENE.blend or --scenes, not both")
     if args.blend:
-        from .cli import UsageError, _check_blend
+        from ..engine.blender.cli import UsageError, check_blend
 
         try:
-            args.blend = _check_blend(args.blend)
+            args.blend = check_blend(args.blend)
         except UsageError as exc:
             raise BenchError(str(exc)) from None
         args.specs = [{"name": Path(args.blend).stem, "title": Path(args.blend).name,
@@ -1056,7 +1056,7 @@ def parse_args(argv):
         raise BenchError(f"--knobs: unknown knob {bad[0]!r} (one of {', '.join(KNOBS)})" if bad
                          else "--knobs is empty")
     args.knobs = list(dict.fromkeys(knobs))
-    from ..pipeline import PRESETS
+    from ..engine.settings import PRESETS
     presets = [] if args.presets.strip().lower() == "none" else [
         p.strip() for p in args.presets.split(",") if p.strip()]
     bad = [p for p in presets if p not in PRESETS]
@@ -1070,12 +1070,12 @@ def parse_args(argv):
     elif args.cycles_samples.strip().lower() == "none":
         args.cycles_samples = []
     else:
-        args.cycles_samples = sorted(set(_int_list(args.cycles_samples, "--cycles-samples")))
-    ref = _int_list(args.reference_samples, "--reference-samples")
+        args.cycles_samples = sorted(set(int_list(args.cycles_samples, "--cycles-samples")))
+    ref = int_list(args.reference_samples, "--reference-samples")
     if len(ref) != 1 or ref[0] < 2:
         raise BenchError("--reference-samples must be one integer >= 2")
     args.reference_samples = ref[0]
-    repeat = _int_list(args.repeat, "--repeat")
+    repeat = int_list(args.repeat, "--repeat")
     if len(repeat) != 1:
         raise BenchError("--repeat must be one integer >= 1")
     args.repeat = repeat[0]
@@ -1100,7 +1100,7 @@ def run(args, argv) -> tuple[dict, int]:
         import matplotlib  # noqa: F401
     except ImportError as exc:
         raise BenchError(f"needs bpy, OpenEXR and matplotlib: {exc}") from None
-    from .bench_cycles import cycles_functions
+    from .vs_cycles import cycles_functions
 
     try:
         os.makedirs(args.out, exist_ok=True)

@@ -102,7 +102,7 @@ GRID = (4, 4)                     # rows, columns of blocks
 LANTERNA_SEED = 1
 CHECK_SAMPLES = 256               # the Cycles render the issue's checks compare with
 TIME_FRACTION = 0.25
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[1]         # the checkout: bench/ lies in it
 STORED_REFERENCES = REPO / "tests" / "data" / "cycles_gi"
 STORED_RESOLUTION = (160, 120)
 CACHE_DIR = Path("out") / "bench_cache"
@@ -113,12 +113,12 @@ class BenchError(Exception):
     """An expected failure: printed as one line, no traceback."""
 
 
-class _Parser(argparse.ArgumentParser):
+class Parser(argparse.ArgumentParser):
     def error(self, message):
         raise BenchError(message)
 
 
-def _log(text: str) -> None:
+def log(text: str) -> None:
     print(text, file=sys.stderr, flush=True)
 
 
@@ -188,7 +188,7 @@ def render_with_noisy_pass(scene, path: str):
     a sample count costs one render, not two."""
     import bpy
 
-    from .. import imageio
+    from ..engine import imageio
 
     layer = scene.view_layers[0]
     layer.cycles.denoising_store_passes = True
@@ -266,7 +266,7 @@ def cycles_curve(bscene, name, resolution, cycles_samples, cycles, tmpdir, warm:
     rows, images, failures = [], {}, []
     for spp in cycles_samples:
         label = f"Cycles {spp} spp (+ OIDN)"
-        _log(f"{name}: {label} ...")
+        log(f"{name}: {label} ...")
         configure(bscene, spp, CYCLES_SEED, gi=True)
         try:
             with _blender_output_to(os.path.join(tmpdir, "blender.log")):
@@ -369,7 +369,7 @@ def rendered_reference(name, bscene, resolution, samples, configure, render_exr,
             with np.load(path) as data:
                 img, dt = data["image"].astype(np.float64), float(data["seconds"])
         else:
-            _log(f"  reference: Cycles {per_seed} spp, seed {seed} ...")
+            log(f"  reference: Cycles {per_seed} spp, seed {seed} ...")
             configure(bscene, per_seed, seed, gi=True)
             with _blender_output_to(os.path.join(tmpdir, "blender.log")):
                 img, dt = render_exr(bscene, os.path.join(tmpdir, f"ref_{name}_{seed}.exr"))
@@ -397,7 +397,7 @@ def build_seed_scene(name: str, resolution):
     100 %; a scene that cannot be built is a ``BenchError``."""
     import bpy
 
-    from . import seed_scenes
+    from ..engine.blender import seed_scenes
 
     w, h = resolution
     try:
@@ -414,9 +414,9 @@ def bench_scene(name, resolution, cycles_samples, reference_samples, cycles, tmp
                 warm: dict, compare=None) -> dict:
     import bpy
 
-    from .export import export_scene
-    from ..pipeline import RenderSettings, render
-    from ..scene import SceneError
+    from ..engine.blender.export import export_scene
+    from ..engine.pipeline import RenderSettings, render
+    from ..engine.scene import SceneError
 
     configure, render_exr, _source = cycles
     w, h = resolution
@@ -427,7 +427,7 @@ def bench_scene(name, resolution, cycles_samples, reference_samples, cycles, tmp
     out = {"scene": name, "resolution": [w, h], "compare_at": list(compare),
            "downsample_factor": factor, "rows": [], "failures": []}
     # Lanterna
-    _log(f"{name}: Lanterna, preset final ...")
+    log(f"{name}: Lanterna, preset final ...")
     try:
         t0 = time.perf_counter()
         scene = export_scene(bpy.context.evaluated_depsgraph_get())
@@ -552,7 +552,7 @@ def print_scene(out: dict) -> None:
 
 
 # -- Command line --------------------------------------------------------------------------------
-def _resolution(text: str):
+def parse_resolution(text: str):
     try:
         w, h = (int(v) for v in text.lower().split("x"))
     except ValueError:
@@ -582,7 +582,7 @@ def _compare_at(text, resolution):
     return (cw, ch), w // cw
 
 
-def _int_list(text: str, flag: str):
+def int_list(text: str, flag: str):
     try:
         values = [int(v) for v in text.split(",") if v.strip()]
     except ValueError:
@@ -593,7 +593,7 @@ def _int_list(text: str, flag: str):
 
 
 def parse_args(argv):
-    parser = _Parser(prog=PROG, description=__doc__.split("\n\n")[0])
+    parser = Parser(prog=PROG, description=__doc__.split("\n\n")[0])
     parser.add_argument("--resolution", default="x".join(map(str, DEFAULT_RESOLUTION)))
     parser.add_argument("--scenes", default=",".join(DEFAULT_SCENES))
     parser.add_argument("--cycles-samples", default=",".join(map(str, DEFAULT_CYCLES_SAMPLES)))
@@ -603,13 +603,13 @@ def parse_args(argv):
                              "compare there (e.g. --resolution 640x480 --compare-at 160x120)")
     parser.add_argument("--json", default=None)
     args = parser.parse_args(argv)
-    args.resolution = _resolution(args.resolution)
+    args.resolution = parse_resolution(args.resolution)
     args.compare_at, args.factor = _compare_at(args.compare_at, args.resolution)
     args.scenes = [s.strip() for s in args.scenes.split(",") if s.strip()]
     if not args.scenes:
         raise BenchError("--scenes is empty")
-    args.cycles_samples = _int_list(args.cycles_samples, "--cycles-samples")
-    ref = _int_list(args.reference_samples, "--reference-samples")
+    args.cycles_samples = int_list(args.cycles_samples, "--cycles-samples")
+    ref = int_list(args.reference_samples, "--reference-samples")
     if len(ref) != 1 or ref[0] < 2:
         raise BenchError("--reference-samples must be one integer >= 2")
     args.reference_samples = ref[0]
@@ -622,7 +622,7 @@ def run(args) -> tuple[dict, int]:
         import OpenEXR  # noqa: F401
     except ImportError as exc:
         raise BenchError(f"needs bpy and OpenEXR: {exc}") from None
-    from .. import imageio
+    from ..engine import imageio
 
     if args.json and (problem := imageio.output_problem(args.json)):
         raise BenchError(f"--json {args.json}: {problem}")

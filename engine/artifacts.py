@@ -66,13 +66,15 @@ from pathlib import Path
 import numpy as np
 
 from .irradiance_cache import IrradianceCache
+from .npzjson import jsonable, pack_json, unpack_json
 from .photons import PhotonMap
 from .scene import SceneError
+from .settings import RenderSettings
 from .shadow_photons import ShadowPhotonMap
 
 __all__ = ["FORMAT_VERSION", "LANTERNA_VERSION", "MAP_SETTINGS", "Artifacts", "ArtifactError",
            "scene_fingerprint", "scene_parts", "settings_part", "map_settings", "save_artifacts",
-           "load_artifacts", "pack_json", "unpack_json"]
+           "load_artifacts"]
 
 FORMAT_VERSION = 1
 
@@ -140,54 +142,9 @@ class Artifacts:
                 "cache": len(self.cache) if self.cache is not None else 0}
 
 
-# --- JSON in numpy entries ---------------------------------------------------------------------
-def _jsonable(obj):
-    """Plain JSON values; dicts with non-string keys (the shadow map's per-light stats keyed by
-    light index) become {"__items__": [[key, value], ...]} so their int keys come back."""
-    if isinstance(obj, dict):
-        if all(isinstance(k, str) for k in obj):
-            return {k: _jsonable(v) for k, v in obj.items()}
-        return {"__items__": [[_jsonable(k), _jsonable(v)] for k, v in obj.items()]}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if obj is None or isinstance(obj, (str, bool, int, float)):
-        return obj
-    return str(obj)
-
-
-def _restore(obj):
-    if isinstance(obj, dict):
-        if set(obj) == {"__items__"}:
-            return {_key(k): _restore(v) for k, v in obj["__items__"]}
-        return {k: _restore(v) for k, v in obj.items()}
-    if isinstance(obj, list):
-        return [_restore(v) for v in obj]
-    return obj
-
-
-def _key(k):
-    return tuple(k) if isinstance(k, list) else k
-
-
-def pack_json(obj) -> np.ndarray:
-    """``obj`` (dicts, lists, numbers, strings, numpy values) as a 0-d unicode array."""
-    return np.array(json.dumps(_jsonable(obj), allow_nan=True))
-
-
-def unpack_json(value):
-    """The inverse of ``pack_json``."""
-    return _restore(json.loads(str(np.asarray(value))))
-
-
 # --- Fingerprint -------------------------------------------------------------------------------
 def _resolved(settings):
     """Resolved ``RenderSettings`` from settings, a dict of them, or None (the defaults)."""
-    from .pipeline import RenderSettings          # pipeline imports this module: import late
-
     if settings is None:
         settings = RenderSettings()
     elif isinstance(settings, dict):
@@ -204,7 +161,7 @@ def map_settings(settings) -> dict:
 
 def settings_part(settings) -> str:
     """sha256 hex of the JSON of ``map_settings(settings)``."""
-    text = json.dumps(_jsonable(map_settings(settings)), sort_keys=True)
+    text = json.dumps(jsonable(map_settings(settings)), sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()
 
 

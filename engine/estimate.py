@@ -161,7 +161,16 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from .bsdf import roulette_probabilities
+from .lights import LUMINANCE, area_light_triangles, solid_angle
 from .memory import available_memory
+from .passes import parse_passes
+from .photons import auto_photon_count
+from .plan import make_plan
+from .scene import AreaLight, PointLight, SceneError, SpotLight, SunLight
+from .settings import RenderSettings, auto_lookups, block_side
+from .shadow_photons import (AUTO_SPACING, DEFAULT_K, DEFAULT_MARGIN, MAX_AUTO_COUNT,
+                             MIN_AUTO_COUNT, neighbours_queried)
 
 RATES_SCHEMA = 1
 DEFAULT_RATES_PATH = Path(__file__).resolve().parent / "data" / "rates.json"
@@ -207,7 +216,7 @@ LOOKUP_CHUNK = 8192                  # queries per chunk of PhotonMap.irradiance
 RECORD_BYTES = 2 * 304 + 100
 CACHE_PIXEL_BYTES = 170
 GATHER_RAY_BYTES = 500
-GATHER_CHUNK_POINTS = 256            # points per prepass task (engine/pipeline.py)
+GATHER_CHUNK_POINTS = 256            # points per placement task (indirect.place_cache)
 GATHER_RAYS_PER_CALL = 1 << 19       # engine/gather.py
 SHADOW_PHOTON_BYTES = 53
 SHADOW_PHOTON_WORK_BYTES = 100
@@ -438,8 +447,6 @@ def _first_hit_survival(scene, tris, mids, survival, chunks):
     subtends at the light (Van Oosterom and Strackee; occlusion ignored: the nearest surfaces
     dominate), on the emitting side of an area light; lights weighted by their luminance flux.
     None when no such light exists (suns, the world and emissive meshes use the area mean)."""
-    from .lights import LUMINANCE, solid_angle
-    from .scene import AreaLight, PointLight, SpotLight
 
     lights = []
     for light in scene.lights:
@@ -473,8 +480,6 @@ def scene_facts(scene) -> SceneFacts:
     """The facts of ``scene`` (an ``engine.scene.Scene``, validated or not: non-finite
     triangles count as zero area). Works on the triangles in chunks of a million, so it
     needs little memory beside the scene's."""
-    from .lights import area_light_triangles
-    from .scene import AreaLight, PointLight, SpotLight, SunLight
 
     tris = np.asarray(scene.triangles).reshape(-1, 3, 3)
     count = len(tris)
@@ -519,7 +524,6 @@ def scene_facts(scene) -> SceneFacts:
     # (Bad values are the validate stage's to name: here they only must not poison counts.)
     diffuse = np.clip(np.nan_to_num(table["diffuse"].astype(np.float64)), 0, 1).reshape(-1, 3)
     specular = np.clip(np.nan_to_num(table["specular"].astype(np.float64)), 0, 1).reshape(-1, 3)
-    from .photons import roulette_probabilities
     p_d, p_s = roulette_probabilities(diffuse, specular)
     if total > 0 and len(p_d):
         share = area_m[:len(p_d)] / total
@@ -573,21 +577,19 @@ def scene_facts(scene) -> SceneFacts:
 
 
 def plan_for(facts: SceneFacts, settings):
-    """``engine.plan.make_plan`` on the facts (stand-ins for the scene, lights and arrays it
-    reads), so the estimate plans exactly as the pipeline will."""
-    from .plan import make_plan
-
+    """``engine.plan.make_plan`` on the facts (stand-ins for the scene, lights and material
+    table it reads), so the estimate plans exactly as the pipeline will."""
     diffuse = np.asarray(facts.diffuse, np.float64).reshape(-1, 3)
     specular = np.asarray(facts.specular, np.float64).reshape(-1, 3)
     sampled = [SimpleNamespace(kind=kind, shadow_photons=on,
                                tris=np.array([[0.0, 0.0, 0.0], [size, 0.0, 0.0]]))
                for kind, on, size in facts.sampled_lights]
     lights = SimpleNamespace(empty=facts.delta_lights == 0 and not sampled, sampled=sampled)
-    arrays = SimpleNamespace(diffuse=diffuse, specular=specular,
-                             is_diffuse=np.any(diffuse > 0, axis=1),
-                             material_count=len(diffuse), has_emission=facts.has_emission,
-                             has_specular=bool(np.any(specular > 0)))
-    return make_plan(SimpleNamespace(extent=facts.extent), settings, lights, arrays)
+    materials = SimpleNamespace(diffuse=diffuse, specular=specular,
+                                is_diffuse=np.any(diffuse > 0, axis=1), count=len(diffuse),
+                                has_emission=facts.has_emission,
+                                has_specular=bool(np.any(specular > 0)))
+    return make_plan(SimpleNamespace(extent=facts.extent), settings, lights, materials)
 
 
 # -- The estimate -----------------------------------------------------------------------------
@@ -696,12 +698,10 @@ def record_count(pixels: int, a: float, window=None) -> float:
 
 def camera_blocks(frame, border, samples: int) -> tuple[int, int, int]:
     """(pixels, blocks, pixels of the largest block) the camera stage shades for the window
-    ``border`` of a ``frame``: the square full-frame blocks of ``pipeline.camera_blocks``
-    (side sqrt(TARGET_BATCH_SAMPLES / samples) rounded down to a multiple of 8, clipped to
-    the frame) that meet the window; each is shaded whole (so tiles of a still agree)."""
-    from .pipeline import TARGET_BATCH_SAMPLES
-
-    side = max(8, int(np.sqrt(TARGET_BATCH_SAMPLES / max(1, samples))) // 8 * 8)
+    ``border`` of a ``frame``: the square full-frame blocks of ``settings.camera_blocks``
+    (side ``settings.block_side``, clipped to the frame) that meet the window; each is shaded
+    whole (so tiles of a still agree)."""
+    side = block_side(samples)
     (full_w, full_h), (x0, y0, x1, y1) = frame, border
     widths = [min(b * side + side, full_w) - b * side for b in range(x0 // side, -(-x1 // side))]
     heights = [min(b * side + side, full_h) - b * side for b in range(y0 // side, -(-y1 // side))]
@@ -756,9 +756,6 @@ def estimate_from_facts(facts: SceneFacts, settings, rates: Rates | None = None,
     here). ``reused``: the maps come from ``bake`` or a file (no photon, cache or
     shadow-photon work and no new memory for them). ``available``: bytes, for the report.
     ``camera`` False: the stages of ``bake`` only (no camera, no passes)."""
-    from .pipeline import auto_lookups
-    from .shadow_photons import (AUTO_SPACING, DEFAULT_K, DEFAULT_MARGIN, MAX_AUTO_COUNT,
-                                 MIN_AUTO_COUNT, neighbours_queried)
 
     rates = rates or load_rates()
     s = settings.resolved()
@@ -833,7 +830,6 @@ def estimate_from_facts(facts: SceneFacts, settings, rates: Rates | None = None,
                 count * SHADOW_PHOTON_WORK_BYTES, shadow_photons=count)
 
     # camera
-    from .passes import parse_passes
     wanted = parse_passes(passes)
     if not camera:
         return _finish(stages, plan, facts, s, rates, W, available)
@@ -890,8 +886,6 @@ def estimate_from_facts(facts: SceneFacts, settings, rates: Rates | None = None,
 def _photon_counts(facts: SceneFacts, s, plan, pixels: int) -> dict:
     """Photons emitted (automatic: from the full frame's ``pixels``), photon rays, stored
     (all, and kept) and radiance estimates (module docstring)."""
-    from .photons import auto_photon_count
-
     emitted = s.photons or auto_photon_count(pixels)
     c = facts.closure
     rho = min(facts.survival * c, 0.999)
@@ -923,8 +917,6 @@ def _finish(stages, plan, facts, settings, rates, workers, available) -> Estimat
 def estimate_cost(scene, settings=None, rates: Rates | None = None, passes=(),
                   reused: bool = False) -> Estimate:
     """The estimate of rendering ``scene`` with ``settings`` (module docstring)."""
-    from .pipeline import RenderSettings
-
     settings = settings or RenderSettings()
     return estimate_from_facts(scene_facts(scene), settings, rates, passes, reused,
                                available_memory())
@@ -934,8 +926,6 @@ def check_memory(estimate: Estimate, available: int | None = None) -> None:
     """``SceneError`` when the estimate's peak memory exceeds ``available`` bytes (default
     ``available_memory()``); the message gives the estimate, its biggest stages and what
     to lower."""
-    from .scene import SceneError
-
     if available is None:
         available = available_memory()
     if available is None or estimate.peak_bytes <= available:
@@ -962,8 +952,6 @@ def preflight(scene, settings, passes=(), reused: bool = False, camera: bool = T
     estimate as a report entry; ``SceneError`` (from ``check_memory``) when it cannot fit. A
     scene whose arrays cannot even be counted gets ``{"error": ...}`` and is left to the
     validate stage, which names the problem."""
-    from .scene import SceneError
-
     t0 = time.perf_counter()
     available = available_memory()
     try:

@@ -85,20 +85,24 @@ class RadianceEstimates:
         normals = photon_map.normals[pick].astype(np.float64)
         normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
         chunks = np.array_split(np.arange(wanted), max(1, wanted // 16384))
-        stats: dict = {}
 
         def estimate(c):
-            return photon_map.irradiance(positions[c], normals[c], k=k, max_radius=max_radius,
-                                         stats=stats)
+            counters = {}                    # one per chunk: the pool's threads share none
+            e = photon_map.irradiance(positions[c], normals[c], k=k, max_radius=max_radius,
+                                      stats=counters)
+            return e, counters
 
         parts = list(pool.map(estimate, chunks)) if pool is not None else [estimate(c) for c in chunks]
-        irradiance = np.concatenate(parts).astype(np.float32)
+        irradiance = np.concatenate([e for e, _ in parts]).astype(np.float32)
+        queries = sum(c.get("queries", 0) for _, c in parts)
+        query_seconds = sum(c.get("query_seconds", 0.0) for _, c in parts)
         out = cls(positions.astype(np.float32), normals.astype(np.float32), irradiance,
                   max_radius=float(max_radius))
         from pykdtree.kdtree import KDTree
         out._tree = KDTree(out.positions, leafsize=16)
         out.stats = {"estimates": wanted, "fraction": wanted / total, "k": k,
-                     "seconds": time.perf_counter() - t0, "bytes": int(3 * out.positions.nbytes)}
+                     "seconds": time.perf_counter() - t0, "bytes": int(3 * out.positions.nbytes),
+                     "queries": queries, "query_thread_seconds": query_seconds}
         return out
 
     def lookup(self, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
@@ -178,13 +182,13 @@ def photon_guided_allocation(points, normals, photon_map, m, n, extra, k=GUIDE_P
 
 
 def final_gather(points: np.ndarray, normals: np.ndarray, offset_normals: np.ndarray,
-                 estimates: RadianceEstimates, accel, arrays, rng: np.random.Generator,
+                 estimates: RadianceEstimates, accel, surfaces, rng: np.random.Generator,
                  m: int = 8, n: int = 32, max_specular: int = 4, stats: dict | None = None,
                  guide=None, guide_extra: float = 1.0):
     """Indirect irradiance at ``points`` (P, 3) with unit ``normals`` (facing the viewer) by the
     stratified final gather. ``offset_normals``: geometric normals for the ray offset.
-    ``arrays``: the pipeline's per-material tables (``diffuse_over_pi``, ``specular``,
-    ``is_specular``, ``material_ids``, ``geometric_normals``). ``guide``: a photon map whose
+    ``surfaces``: the scene's ``surfaces.SceneSurfaces`` (normals and materials at hits; a
+    landing point's material is read through ``bsdf``). ``guide``: a photon map whose
     nearby photons steer ``guide_extra`` x M x N extra rays into the strata their light came
     through (``photon_guided_allocation``); None: one ray per stratum.
 
@@ -195,16 +199,16 @@ def final_gather(points: np.ndarray, normals: np.ndarray, offset_normals: np.nda
     extra = guide_extra if guide is not None else 0.0
     step = max(1, int(GATHER_RAYS_PER_CALL // (m * n * (1.0 + extra))))
     if len(points) <= step:
-        return _final_gather_chunk(points, normals, offset_normals, estimates, accel, arrays,
+        return _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfaces,
                                    rng, m, n, max_specular, stats, guide, guide_extra)
     parts = [_final_gather_chunk(points[a:a + step], normals[a:a + step],
-                                 offset_normals[a:a + step], estimates, accel, arrays, rng, m, n,
+                                 offset_normals[a:a + step], estimates, accel, surfaces, rng, m, n,
                                  max_specular, stats, guide, guide_extra)
              for a in range(0, len(points), step)]
-    return tuple(np.concatenate(arrays_) for arrays_ in zip(*parts))
+    return tuple(np.concatenate(columns) for columns in zip(*parts))
 
 
-def _final_gather_chunk(points, normals, offset_normals, estimates, accel, arrays, rng, m, n,
+def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfaces, rng, m, n,
                         max_specular, stats, guide, guide_extra):
     count = len(points)
     cells = m * n
@@ -247,11 +251,11 @@ def _final_gather_chunk(points, normals, offset_normals, estimates, accel, array
         if len(ray_of) == 0:
             break
         x = origins + tt[:, None].astype(np.float64) * dirs
-        ng = arrays.geometric_normals[prim].astype(np.float64)
+        ng = surfaces.geometric_normals[prim].astype(np.float64)
         facing = np.einsum("ij,ij->i", ng, dirs) > 0
         ng[facing] *= -1                                   # towards the gather ray
-        mat = arrays.material_ids[prim]
-        rho = arrays.diffuse_over_pi[mat]
+        surface = surfaces.params(prim)
+        rho = surface.diffuse_over_pi
         diffuse = np.any(rho > 0, axis=1)
         if diffuse.any():
             e = estimates.lookup(x[diffuse], ng[diffuse]).astype(np.float64)
@@ -259,14 +263,13 @@ def _final_gather_chunk(points, normals, offset_normals, estimates, accel, array
             if throughput is not None:
                 value *= throughput[diffuse]
             radiance[ray_of[diffuse]] += value
-        mirror = arrays.is_specular[mat]
+        mirror = surface.is_specular
         if bounce == max_specular or not mirror.any():
             break
         idx = np.nonzero(mirror)[0]
-        dm, nm = dirs[idx], ng[idx]
-        dirs = dm - 2.0 * np.einsum("ij,ij->i", dm, nm)[:, None] * nm
+        nm = ng[idx]
+        dirs, weight, _pdf = surface.subset(idx).bsdf().mirror.sample(-dirs[idx], nm)
         origins = accel.offset_origins(x[idx], nm, dirs)
-        weight = arrays.specular[mat[idx]]
         throughput = weight if throughput is None else throughput[idx] * weight
         ray_of = ray_of[idx]
     if stats is not None:

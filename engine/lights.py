@@ -33,6 +33,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import sampling
+from .bsdf import MaterialTable
 from .scene import AreaLight, PointLight, Scene, SpotLight, SunLight
 
 SOLID_ANGLE_MAX_TRIANGLES = 64
@@ -372,9 +373,9 @@ class LightSet:
         self.points_intensity = np.array(self.points_intensity, np.float64).reshape(-1, 3)
 
         # Emissive meshes: one emitter per object, from triangles whose material emits.
-        table = scene.material_table()
+        materials = MaterialTable(scene)
         if len(scene.triangles):
-            emissive = np.any(table["exitance"][scene.material_ids] > 0, axis=1)
+            emissive = materials.is_emissive[scene.material_ids]
             self.emissive_triangles = emissive
             if np.any(emissive):
                 idx = np.nonzero(emissive)[0]
@@ -383,9 +384,10 @@ class LightSet:
                     sel = idx[keys == key]
                     oid, mid = int(key // 65536), int(key % 65536)
                     name = scene.object_names[oid] if oid < len(scene.object_names) else "Mesh"
+                    surface = materials.at(np.array([mid]))
                     self.sampled.append(TriangleEmitter(
-                        name, scene.triangles[sel], table["exitance"][mid].astype(np.float64) / np.pi,
-                        two_sided=bool(table["both_sides"][mid]), in_bvh=True))
+                        name, scene.triangles[sel], surface.emitted_radiance[0],
+                        two_sided=bool(surface.both_sides[0]), in_bvh=True))
         else:
             self.emissive_triangles = np.zeros(0, bool)
         if not scene.world.is_black:

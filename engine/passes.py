@@ -49,6 +49,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .camera import pixel_rays
+from .shadow_photons import LIT, PENUMBRA, UMBRA
+
 PASSES = {
     "direct": "Direct",
     "indirect": "Indirect",
@@ -92,12 +95,55 @@ class CentreHits:
     x: np.ndarray            # (n, 3) hit position [m]
     ns: np.ndarray           # (n, 3) shading normal, towards the camera
     ng: np.ndarray           # (n, 3) geometric normal, towards the camera
-    material: np.ndarray     # (n,) material index
+    surface: object          # bsdf.SurfaceParams at the hits
     diffuse: np.ndarray      # (n,) bool: the material reflects diffusely
     shape: tuple             # (H, W) of the window
 
 
-def photon_map_view(hits: CentreHits, photon_map, k, max_radius, min_bounces, diffuse_over_pi,
+def centre_hits(scene, accel, surfaces) -> CentreHits:
+    """First hits of one ray per window pixel through its centre (``surfaces``: the scene's
+    ``surfaces.SceneSurfaces``)."""
+    width, height = scene.camera.window_size
+    origins, directions, tmax = pixel_rays(scene.camera, 0, width * height, 1,
+                                           np.random.default_rng(0), centres=True)
+    t_hit, prim, bu, bv = accel.intersect(origins, directions, tmax)
+    hit = np.nonzero(prim >= 0)[0]
+    t_hit, prim, bu, bv, d = t_hit[hit], prim[hit], bu[hit], bv[hit], directions[hit]
+    x = origins[hit] + t_hit[:, None] * d
+    ng, ns, _front = surfaces.normals(prim, bu, bv, d)
+    surface = surfaces.params(prim)
+    return CentreHits(pixel=hit, x=x, ns=ns, ng=ng, surface=surface,
+                      diffuse=surface.is_diffuse, shape=(height, width))
+
+
+def diagnostic_passes(wanted, scene, settings, maps, usage) -> dict:
+    """The passes of ``wanted`` made from the maps after the camera stage (all but Direct,
+    Indirect and Emission): ``maps`` is the render's ``preparation.Prepared`` (accel,
+    surfaces, lights, photon map and its radius and filter, shadow map, cache) and ``usage``
+    the camera's Cache usage shares."""
+    shape = scene.camera.window_size[::-1]
+    out = {}
+    hits = None
+    if {"PhotonMap", "ShadowClasses"} & set(wanted):
+        hits = centre_hits(scene, maps.accel, maps.surfaces)
+    if "PhotonMap" in wanted:
+        # All stored photons (in full mode with the photon map at the hit the map keeps only
+        # the photons that bounced, so the view shows indirect light there).
+        out["PhotonMap"] = photon_map_view(hits, maps.photon_map, settings.photon_k,
+                                           maps.radius or np.inf, 0, maps.cone)
+    if "ShadowClasses" in wanted:
+        out["ShadowClasses"] = shadow_classes_image(hits, maps.shadow_map,
+                                                    range(len(maps.lights.sampled)))
+    if "Photons" in wanted:
+        out["Photons"] = photons_image(scene.camera, maps.accel, maps.photon_map, shape)
+    if "CachePoints" in wanted:
+        out["CachePoints"] = cache_points_image(scene.camera, maps.accel, maps.cache, shape)
+    if "CacheUsage" in wanted:
+        out["CacheUsage"] = cache_usage_image(usage, shape)
+    return out
+
+
+def photon_map_view(hits: CentreHits, photon_map, k, max_radius, min_bounces,
                     cone_filter=None) -> np.ndarray:
     """The seed's direct view of the photon map (9.5): L = rho_d / pi * E_k at each pixel
     centre's first diffuse hit (E_k: the k-nearest estimate, Eq. 9.11, counting photons of
@@ -108,7 +154,7 @@ def photon_map_view(hits: CentreHits, photon_map, k, max_radius, min_bounces, di
     if len(d) and photon_map is not None and len(photon_map):
         e = photon_map.irradiance(hits.x[d], hits.ng[d], k=k, max_radius=max_radius,
                                   min_bounces=min_bounces, cone_filter=cone_filter)
-        image[hits.pixel[d]] = e * diffuse_over_pi[hits.material[d]]
+        image[hits.pixel[d]] = e * hits.surface.diffuse_over_pi[d]
     return image.reshape(h, w, 3)
 
 
@@ -116,8 +162,6 @@ def shadow_classes_image(hits: CentreHits, shadow_map, light_indices) -> np.ndar
     """Green / red / blue shares of the lights in ``light_indices`` (indices in
     ``lights.sampled`` that the shadow-photon map covers) for which each pixel centre's
     first diffuse hit is lit / penumbra / umbra."""
-    from .shadow_photons import LIT, PENUMBRA, UMBRA
-
     h, w = hits.shape
     image = np.zeros((h * w, 3), np.float32)
     lights = [li for li in light_indices if shadow_map is not None and shadow_map.covers(li)]

@@ -38,8 +38,11 @@ import numpy as np
 
 from . import sampling
 from .accel import offset_distance
-from .lights import LUMINANCE, area_light_triangles, spot_mask
+from .lights import LUMINANCE, spot_mask
+from .npzjson import pack_json, unpack_json
 from .scene import AreaLight, PointLight, Scene, SpotLight, SunLight
+from .bsdf import MaterialTable
+from .surfaces import SceneSurfaces
 
 
 def _spread_bits(v: np.ndarray) -> np.ndarray:
@@ -109,14 +112,15 @@ def _light_fluxes(scene: Scene):
                         ("sun", light, center, radius)))
         elif isinstance(light, AreaLight):
             out.append((light.name, light.power, ("area", light)))
-    table = scene.material_table()
+    materials = MaterialTable(scene)
     if len(scene.triangles):
-        emissive = np.nonzero(np.any(table["exitance"][scene.material_ids] > 0, axis=1))[0]
+        emissive = np.nonzero(materials.is_emissive[scene.material_ids])[0]
         if len(emissive):
             areas = scene.triangle_areas()[emissive]
             mids = scene.material_ids[emissive]
-            sides = np.where(table["both_sides"][mids], 2.0, 1.0)
-            flux = (table["exitance"][mids].astype(np.float64) * (areas * sides)[:, None]).sum(0)
+            surface = materials.at(mids)
+            sides = np.where(surface.both_sides, 2.0, 1.0)
+            flux = (surface.exitance * (areas * sides)[:, None]).sum(0)
             out.append(("emissive meshes", flux, ("mesh", emissive, areas * sides, mids)))
     if not scene.world.is_black:
         out.append(("World", scene.world.radiance * 4 * np.pi ** 2 * radius ** 2,
@@ -171,8 +175,7 @@ def emit_photons(scene: Scene, count: int, rng: np.random.Generator) -> EmittedP
             normal = np.broadcast_to(light.normal, (n, 3))
             d = normal.copy() if light.collimated else _cosine_directions(np.ascontiguousarray(normal), v)
         elif kind == "mesh":
-            tri_idx, weights, _mids = spec[1], spec[2], spec[3]
-            table = scene.material_table()
+            tri_idx, weights = spec[1], spec[2]
             cdf = np.cumsum(weights)
             pick = np.minimum(np.searchsorted(cdf, u[:, 0] * cdf[-1], side="right"), len(cdf) - 1)
             lower = np.where(pick > 0, cdf[np.maximum(pick - 1, 0)], 0.0)
@@ -182,7 +185,8 @@ def emit_photons(scene: Scene, count: int, rng: np.random.Generator) -> EmittedP
             o = tri[:, 0] * (1 - bary[:, 0:1] - bary[:, 1:2]) + tri[:, 1] * bary[:, 0:1] + tri[:, 2] * bary[:, 1:2]
             nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
             nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
-            both = table["both_sides"][scene.material_ids[tri_idx[pick]]]
+            surface = MaterialTable(scene).at(scene.material_ids[tri_idx[pick]])
+            both = surface.both_sides
             flip = both & (rng.random(n) < 0.5)
             nrm[flip] *= -1
             d = _cosine_directions(nrm, v)
@@ -190,7 +194,7 @@ def emit_photons(scene: Scene, count: int, rng: np.random.Generator) -> EmittedP
             eps = offset_distance(o, scene.extent)
             o = o + nrm * eps[:, None]
             # Per-photon colour: each triangle's exitance, normalised to the meshes' flux.
-            m = table["exitance"][scene.material_ids[tri_idx[pick]]].astype(np.float64)
+            m = surface.exitance
             power = m / np.maximum((m @ LUMINANCE)[:, None], 1e-30) * (flux @ LUMINANCE) / n
         else:  # world
             center, radius = spec[1], spec[2]
@@ -289,7 +293,6 @@ class PhotonMap:
         """The map as named numpy arrays (no Python objects: ``np.load(allow_pickle=False)``
         reads them back): the five photon arrays with their dtypes, ``stats`` as JSON, the
         kd-tree library and whether the photons are in built (Morton) order."""
-        from .artifacts import pack_json
         out = {key: np.ascontiguousarray(getattr(self, key)) for key in self.ARRAY_FIELDS}
         out["stats"] = pack_json(self.stats)
         out["library"] = np.array(str(self.library))
@@ -300,7 +303,6 @@ class PhotonMap:
     def from_arrays(cls, arrays, build: bool = True) -> "PhotonMap":
         """The inverse of ``to_arrays``; ``build`` makes the kd-tree, keeping the saved order
         when the map was saved built (the same map, photon for photon)."""
-        from .artifacts import unpack_json
         pmap = cls(*(np.asarray(arrays[key]) for key in cls.ARRAY_FIELDS))
         pmap.stats = unpack_json(arrays["stats"])
         pmap.library = str(arrays["library"])
@@ -400,46 +402,19 @@ class PhotonMap:
         return flux
 
 
-def roulette_probabilities(rho_d: np.ndarray, rho_s: np.ndarray):
-    """Russian roulette's probabilities (P_d, P_s) per material from the diffuse and specular
-    reflectances (M, 3): each the largest channel of its reflectance, both scaled by
-    1 / (P_d + P_s) where that sum exceeds 1 (DESIGN.md §4). A survivor's power is scaled by
-    rho / P per channel, so no channel's weight grows (rho_c <= max rho = P). The seed's
-    channel-averaged P let a channel grow: rho = (0.9, 0.6, 0.3) gave P = 0.6 and red x1.5 a
-    bounce, a red variance series in 1.5^2 x 0.6 = 1.35 a bounce, which diverges."""
-    p_d = np.max(rho_d, axis=1) if len(rho_d) else np.zeros(0)
-    p_s = np.max(rho_s, axis=1) if len(rho_s) else np.zeros(0)
-    total = p_d + p_s
-    over = total > 1.0
-    if over.any():
-        p_d = np.where(over, p_d / np.where(over, total, 1.0), p_d)
-        p_s = np.where(over, p_s / np.where(over, total, 1.0), p_s)
-    return p_d, p_s
-
-
 def trace_photons(scene: Scene, accel, emitted: EmittedPhotons, rng: np.random.Generator,
                   max_bounces: int = 128, ray_log: list | None = None,
-                  geometric_normals: np.ndarray | None = None) -> PhotonMap:
+                  surfaces: SceneSurfaces | None = None) -> PhotonMap:
     """Trace emitted photons (Russian roulette, 9.2) and store them at diffuse hits.
 
     All photons advance together: one Embree call per bounce for every live photon. Geometry
     is float32 (Embree's precision); powers stay float64 until they are stored. A photon that
     survives its ``max_bounces``-th bounce is counted in ``capped_paths`` / ``flux_capped``.
-    ``geometric_normals``: ``scene.geometric_normals()`` when the caller has them (the photon
-    pass computes them once for all its chunks)."""
-    table = scene.material_table()
-    rho_d = table["diffuse"].astype(np.float64)
-    rho_s = table["specular"].astype(np.float64)
-    p_d, p_s = roulette_probabilities(rho_d, rho_s)
-    p_ds = p_d + p_s
-    absorb = np.clip(1.0 - rho_d - rho_s, 0.0, 1.0)
-    # Survivors' power scale per material: rho / P per channel (colour stays unbiased, and
-    # no channel's weight exceeds 1 where P_d + P_s <= 1).
-    scale_d = rho_d / np.where(p_d > 0, p_d, 1.0)[:, None]
-    scale_s = rho_s / np.where(p_s > 0, p_s, 1.0)[:, None]
-    normals_geo = (scene.geometric_normals() if geometric_normals is None
-                   else geometric_normals).astype(np.float32, copy=False)
-    stores_at = p_d > 0                           # materials where photons are stored
+    ``surfaces``: the scene's ``SceneSurfaces`` when the caller has them (the photon pass
+    makes them once for all its chunks); a hit's material is read through ``bsdf``."""
+    if surfaces is None:
+        surfaces = SceneSurfaces(scene)
+    normals_geo = surfaces.geometric_normals
     o = np.ascontiguousarray(emitted.origins, np.float32)
     d = np.ascontiguousarray(emitted.directions, np.float32)
     power = emitted.power.copy()
@@ -469,8 +444,9 @@ def trace_photons(scene: Scene, accel, emitted: EmittedPhotons, rng: np.random.G
         flip = sampling.dot_rows(n, d) > 0                 # turn n towards the photon
         if flip.any():
             n[flip] *= -1
-        mat = scene.material_ids[prim]
-        diffuse = stores_at[mat]
+        surface = surfaces.params(prim)
+        bsdf = surface.bsdf()
+        diffuse = surface.is_diffuse                    # photons are stored at diffuse hits
         if diffuse.all():
             sel = slice(None)
         else:
@@ -481,14 +457,15 @@ def trace_photons(scene: Scene, accel, emitted: EmittedPhotons, rng: np.random.G
             stored["incoming"].append(d[sel].astype(np.float16))
             stored["normals"].append(n[sel].astype(np.float16))
             stored["bounces"].append(np.minimum(depth[sel], 255).astype(np.uint8))
-        # Russian roulette with the reflectances' largest channels.
+        # Russian roulette with the reflectances' largest channels (bsdf.roulette_probabilities).
+        p_d, p_s = bsdf.lobe_probabilities()
         xi = rng.random(len(o))
-        go_diffuse = xi < p_d[mat]
-        alive = xi < p_ds[mat]
+        go_diffuse = xi < p_d
+        alive = xi < p_d + p_s
         # Absorbed flux, per channel: the expected share (1 - rho_d - rho_s) of every hit.
-        # (The power of the photons roulette kills is no estimate of it per channel: with
-        # channel-averaged probabilities a green floor would "absorb" as much red as green.)
-        absorbed += np.einsum("ij,ij->j", power, absorb[mat])
+        # (The power of the photons roulette kills is no estimate of it per channel: a green
+        # floor would "absorb" as much red as green.)
+        absorbed += np.einsum("ij,ij->j", power, bsdf.absorption())
         depth += 1
         over = alive & (depth > max_bounces)
         if over.any():
@@ -498,8 +475,9 @@ def trace_photons(scene: Scene, accel, emitted: EmittedPhotons, rng: np.random.G
         live = np.flatnonzero(alive)
         if len(live) == 0:
             break
-        x, n, d, mat = (np.take(a, live, axis=0) for a in (x, n, d, mat))
+        x, n, d = (np.take(a, live, axis=0) for a in (x, n, d))
         power, depth, go_diffuse = np.take(power, live, axis=0), depth[live], go_diffuse[live]
+        p_d, p_s, lobes = p_d[live], p_s[live], surface.subset(live).bsdf()
         # The next segment starts at the hit pulled back along the incoming ray, then pushed
         # off the surface: at a corner the rounded hit can lie outside the neighbouring face
         # (measured: a ceiling corner hit at z = 3.0000002 on the wall, a new direction
@@ -509,18 +487,20 @@ def trace_photons(scene: Scene, accel, emitted: EmittedPhotons, rng: np.random.G
         # away does not move the paths.
         pull = offset_distance(x, 0.0)
         x = x - sampling.scale_rows(d, pull.astype(d.dtype, copy=False))
+        # A survivor scatters by the lobe the roulette chose, its power scaled by rho / P.
+        scale_d = lobes.diffuse.albedo() / np.where(p_d > 0, p_d, 1.0)[:, None]
         if go_diffuse.all():
-            d = sampling.cosine_directions(n, rng.random((len(live), 2)))
-            power *= np.take(scale_d, mat, axis=0)
+            d = lobes.diffuse.sample(-d, n, rng.random((len(live), 2)))[0]
+            power *= scale_d
         else:
             spec = ~go_diffuse
             new_dir = np.empty_like(d)
             if go_diffuse.any():
-                new_dir[go_diffuse] = sampling.cosine_directions(
-                    n[go_diffuse], rng.random((int(go_diffuse.sum()), 2)))
-            ds, ns = d[spec], n[spec]
-            new_dir[spec] = ds - 2 * sampling.dot_rows(ds, ns)[:, None] * ns
-            power *= np.where(go_diffuse[:, None], scale_d[mat], scale_s[mat])
+                new_dir[go_diffuse] = lobes.diffuse.subset(go_diffuse).sample(
+                    -d[go_diffuse], n[go_diffuse], rng.random((int(go_diffuse.sum()), 2)))[0]
+            new_dir[spec] = lobes.mirror.subset(spec).sample(-d[spec], n[spec])[0]
+            scale_s = lobes.mirror.albedo() / np.where(p_s > 0, p_s, 1.0)[:, None]
+            power *= np.where(go_diffuse[:, None], scale_d, scale_s)
             d = new_dir
         o = accel.offset_origins(x, n, d)
 
@@ -559,10 +539,9 @@ def auto_max_radius(scene: Scene, stored: int, k: int) -> float:
     when the ``stored`` photons spread evenly over the scene's diffuse surface area. The cap
     only matters where photons are sparse (dark corners); elsewhere the k-th neighbour sets
     the radius."""
-    table = scene.material_table()
     if len(scene.triangles) == 0 or stored == 0:
         return max(scene.extent, 1e-9) * 0.05
-    diffuse = np.any(table["diffuse"][scene.material_ids] > 0, axis=1)
+    diffuse = MaterialTable(scene).is_diffuse[scene.material_ids]
     area = float(scene.triangle_areas()[diffuse].sum())
     if not area > 0:
         return max(scene.extent, 1e-9) * 0.05
@@ -607,14 +586,13 @@ def build_photon_map(scene: Scene, accel, count: int, seed: int = 0, max_bounces
     n = len(emitted.origins)
     bounds = [(a, min(a + PHOTON_CHUNK, n)) for a in range(0, n, PHOTON_CHUNK)]
 
-    normals_geo = scene.geometric_normals()
+    surfaces = SceneSurfaces(scene)
 
     def trace(i):
         a, b = bounds[i]
         part = EmittedPhotons(emitted.origins[a:b], emitted.directions[a:b], emitted.power[a:b])
         return trace_photons(scene, accel, part, sampling.rng_for(seed, sampling.STREAM_PHOTON, i + 1),
-                             max_bounces=max_bounces, ray_log=ray_log,
-                             geometric_normals=normals_geo)
+                             max_bounces=max_bounces, ray_log=ray_log, surfaces=surfaces)
 
     t0 = time.perf_counter()
     maps, was_cancelled = [], False

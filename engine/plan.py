@@ -1,7 +1,7 @@
 """The planner: which stages a scene needs, and why, decided before any work (issue 4).
 
 What it computes
-    ``make_plan(scene, settings, lights, arrays)`` -> ``Plan``: for every stage of the
+    ``make_plan(scene, settings, lights, materials)`` -> ``Plan``: for every stage of the
     pipeline, whether it runs and the reason. The rules simulate only the effects a scene
     calls for:
 
@@ -33,6 +33,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from .scene import SceneError
 
 STAGES = ("direct", "photons", "radiance_estimates", "final_gather", "irradiance_cache",
           "shadow_photons", "specular")
@@ -70,17 +72,18 @@ def _light_size(light) -> float:
     return 0.0
 
 
-def make_plan(scene, settings, lights, arrays) -> Plan:
+def make_plan(scene, settings, lights, materials) -> Plan:
+    """The plan for ``scene`` with ``settings``, its ``lights.LightSet`` and its
+    ``bsdf.MaterialTable`` (module docstring)."""
     plan = Plan()
     force = {s.strip() for s in str(getattr(settings, "force", "") or "").split(",") if s.strip()}
     unknown = force - set(STAGES)
     if unknown:
-        from .scene import SceneError
         raise SceneError(f"Render settings: force names unknown stages {sorted(unknown)} "
                          f"(known: {', '.join(STAGES)})")
     full = settings.mode == "full"
-    emits = (not lights.empty) or arrays.has_emission
-    reflects = bool(np.any(arrays.diffuse > 0) or np.any(arrays.specular > 0))
+    emits = (not lights.empty) or materials.has_emission
+    reflects = bool(np.any(materials.diffuse > 0) or np.any(materials.specular > 0))
 
     # direct light
     if not full:
@@ -97,7 +100,7 @@ def make_plan(scene, settings, lights, arrays) -> Plan:
         plan.set("photons", False, "bounces = 0 (direct light only)")
     elif not reflects:
         plan.set("photons", False, "all materials are black: no light bounces")
-    elif not arrays.is_diffuse.any():
+    elif not materials.is_diffuse.any():
         plan.set("photons", False, "no diffuse surface to store photons on")
     elif full:
         plan.set("photons", True, "indirect light")
@@ -124,10 +127,10 @@ def make_plan(scene, settings, lights, arrays) -> Plan:
     elif settings.indirect != "cache":
         plan.set("irradiance_cache", False, "indirect = gather: a gather at every sample")
     else:
-        diffuse_materials = int(arrays.is_diffuse.sum())
+        diffuse_materials = int(materials.is_diffuse.sum())
         plan.set("irradiance_cache", True,
                  f"records on diffuse surfaces ({diffuse_materials} of "
-                 f"{arrays.material_count} materials)")
+                 f"{materials.count} materials)")
 
     # shadow photons
     positioned = [light for light in lights.sampled if getattr(light, "kind", "") in ("mesh", "area")]
@@ -153,7 +156,7 @@ def make_plan(scene, settings, lights, arrays) -> Plan:
         plan.set("shadow_photons", True, "forced on (the planner would skip it)")
 
     # specular paths
-    if arrays.has_specular:
+    if materials.has_specular:
         plan.set("specular", True, "specular materials reflect camera and gather rays")
     else:
         plan.set("specular", False, "no specular materials")

@@ -109,6 +109,7 @@ import numpy as np
 
 from . import sampling
 from .lights import LUMINANCE, EllipseEmitter, TriangleEmitter
+from .npzjson import pack_json, unpack_json
 from .photons import column_bounds, morton_order
 
 LIT, UMBRA, PENUMBRA = 0, 1, 2
@@ -303,7 +304,6 @@ class ShadowPhotonMap:
         the photon and representative arrays with their dtypes, the per-light dicts as key /
         value arrays (``slices.keys`` (L,) int64, ``slices.values`` (L, 2) int64; ``radius``,
         ``rep_slices`` alike), the scalar options as 0-d arrays and ``stats`` as JSON."""
-        from .artifacts import pack_json
         out = {key: np.ascontiguousarray(getattr(self, key)) for key in self.ARRAY_FIELDS}
         for name in ("slices", "rep_slices"):
             table = getattr(self, name)
@@ -320,7 +320,6 @@ class ShadowPhotonMap:
     @classmethod
     def from_arrays(cls, arrays, build: bool = True) -> "ShadowPhotonMap":
         """The inverse of ``to_arrays``; ``build`` makes the kd-trees (``build_trees``)."""
-        from .artifacts import unpack_json
         smap = cls(*(np.asarray(arrays[key]) for key in cls.ARRAY_FIELDS[:4]))
         for key in cls.ARRAY_FIELDS[4:]:
             setattr(smap, key, np.asarray(arrays[key]))

@@ -318,9 +318,9 @@ def last_report(scene_name: str) -> dict | None:
     """What ``export_report`` writes: the last render's state (report, warnings, error, times)
     or, when no render ran, the report of the scene's baked or loaded maps; None if neither."""
     from ..engine.artifacts import LANTERNA_VERSION
-    from ..engine.blender import render_engine, session
+    from ..engine.blender import session
 
-    last = dict(render_engine.LAST_RENDER)
+    last = dict(session.LAST_RENDER)
     if last.get("report"):
         out = {"source": "render"}
         out.update(last)
@@ -368,10 +368,10 @@ classes = (LANTERNA_OT_bake, LANTERNA_OT_clear, LANTERNA_OT_save_maps, LANTERNA_
 
 
 def register():
-    from ..engine.blender.registration import register_classes
+    from ..engine.blender.classes import register_classes
     register_classes(classes)
 
 
 def unregister():
-    from ..engine.blender.registration import unregister_classes
+    from ..engine.blender.classes import unregister_classes
     unregister_classes(classes)

@@ -240,12 +240,12 @@ classes = (LANTERNA_OT_import_ase,)
 
 
 def register():
-    from ..engine.blender.registration import register_classes
+    from ..engine.blender.classes import register_classes
     register_classes(classes)
     bpy.types.TOPBAR_MT_file_import.append(_menu)
 
 
 def unregister():
     bpy.types.TOPBAR_MT_file_import.remove(_menu)
-    from ..engine.blender.registration import unregister_classes
+    from ..engine.blender.classes import unregister_classes
     unregister_classes(classes)

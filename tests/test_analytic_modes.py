@@ -39,8 +39,10 @@ import pytest
 from analytic import box_room, icosphere, triangle_area_sum
 from lanterna.engine import sampling
 from lanterna.engine.accel import Accelerator
-from lanterna.engine.photons import emit_photons, roulette_probabilities, trace_photons
-from lanterna.engine.pipeline import INDIRECT_METHODS, RenderSettings, render
+from lanterna.engine.bsdf import roulette_probabilities
+from lanterna.engine.photons import emit_photons, trace_photons
+from lanterna.engine.pipeline import RenderSettings, render
+from lanterna.engine.settings import INDIRECT_METHODS
 from lanterna.engine.scene import Camera, Material, PointLight, Scene
 
 TOLERANCE = 0.02

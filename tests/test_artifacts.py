@@ -25,7 +25,7 @@ from lanterna.engine import pipeline
 from lanterna.engine.accel import Accelerator
 from lanterna.engine.irradiance_cache import IrradianceCache
 from lanterna.engine.photons import PhotonMap, build_photon_map
-from lanterna.engine.pipeline import PRESETS, RenderSettings
+from lanterna.engine.settings import PRESETS, RenderSettings
 from lanterna.engine.scene import AreaLight, Camera, Material, Scene
 from lanterna.engine.shadow_photons import ShadowPhotonMap
 

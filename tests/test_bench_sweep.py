@@ -1,4 +1,4 @@
-"""``lanterna bench --sweep`` (engine/blender/bench_sweep.py): outputs, front, interpolation.
+"""``lanterna bench --sweep`` (bench/sweep.py): outputs, front, interpolation.
 
 The sweep runs once, in-process, with ``--quick`` on the seed's Scene 1 at 32 x 24 (two knobs,
 photon_k and cache_error, around a cheaper base: the final preset with 50k photons, gather
@@ -24,7 +24,7 @@ bpy = pytest.importorskip("bpy")
 pytest.importorskip("matplotlib")
 
 from lanterna.engine import imageio  # noqa: E402
-from lanterna.engine.blender import bench, bench_cycles, bench_sweep  # noqa: E402
+from lanterna.bench import main as bench, sweep as bench_sweep, vs_cycles as bench_cycles  # noqa: E402
 
 RESOLUTION = (32, 24)
 CYCLES_SAMPLES = (4, 16)

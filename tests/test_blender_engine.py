@@ -157,7 +157,7 @@ def test_unregister_leaves_nothing_registered():
 def test_properties_defaults_limits_and_descriptions(registered):
     scene = reset()
     s = scene.lanterna
-    assert (s.samples, s.light_samples, s.bounces, s.seed, s.threads) == (16, 4, 64, 0, 0)
+    assert (s.samples, s.light_samples, s.bounces, s.seed, s.threads) == (16, 4, 128, 0, 0)
     assert (s.mode, s.photons, s.photon_k, s.photon_radius, s.photon_filter, s.photon_lookups) \
         == ('FULL', 0, 50, 0.0, 'NONE', 0)
     mat = bpy.data.materials.new("M")

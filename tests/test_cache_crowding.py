@@ -1,5 +1,5 @@
 """The irradiance cache's placement does not crowd look-ups where the neighbour check shrank
-records (engine/pipeline.py, ``_cache_prepass``; needs bpy for the seed's Scene 2).
+records (``engine/indirect.py``, ``place_cache``; needs bpy for the seed's Scene 2).
 
 On Scene 2 at 320 x 240 with the ``preview`` preset (a = 0.3, seed 1) the check after the
 stride-2 pass shrinks the large records in one region. When the stride-1 pass filled the
@@ -21,7 +21,11 @@ bpy = pytest.importorskip("bpy")
 def test_refilled_gaps_keep_look_ups_light():
     from dataclasses import replace
 
-    from lanterna.engine import pipeline as P
+    from lanterna.engine.indirect import place_cache
+    from lanterna.engine.passes import centre_hits
+    from lanterna.engine.preparation import prepare
+    from lanterna.engine.settings import RenderSettings
+
     from lanterna.engine.blender import seed_scenes
     from lanterna.engine.blender.export import export_scene
 
@@ -29,13 +33,13 @@ def test_refilled_gaps_keep_look_ups_light():
     b = bpy.context.scene
     b.render.resolution_x, b.render.resolution_y, b.render.resolution_percentage = 320, 240, 100
     scene = export_scene(bpy.context.evaluated_depsgraph_get())
-    settings = P.RenderSettings(preset="preview", seed=1).resolved()
+    settings = RenderSettings(preset="preview", seed=1).resolved()
     # The pipeline's stages up to the final gather the placement uses (as a render makes them).
-    prep = P._prepare(scene, replace(settings, indirect="gather"), None, None, None)
+    prep = prepare(scene, replace(settings, indirect="gather"), None, None, None)
     try:
-        cache, stats = P._cache_prepass(scene, prep.accel, prep.arrays, prep.photon, settings,
-                                        prep.pool, lambda *args: None, None)
-        hits = P._centre_hits(scene, prep.accel, prep.arrays)
+        cache, stats = place_cache(scene, prep.accel, prep.surfaces, prep.indirect, settings,
+                                   prep.pool, lambda *args: None, None)
+        hits = centre_hits(scene, prep.accel, prep.surfaces)
     finally:
         prep.close()
     d = hits.diffuse

@@ -27,8 +27,8 @@ import numpy as np
 import pytest
 
 from analytic import box_room, plane_scene
-from lanterna.engine import estimate, pipeline
-from lanterna.engine.blender.calibrate import calibration_scene
+from lanterna.engine import estimate, preparation
+from lanterna.bench.calibrate import calibration_scene
 from lanterna.engine.pipeline import RenderSettings, bake, render
 from lanterna.engine.scene import Camera, Material, PointLight, Scene, SceneError
 
@@ -174,7 +174,7 @@ def test_too_little_memory_is_refused_before_any_work(monkeypatch):
         raise AssertionError("the BVH was built")
 
     monkeypatch.setattr(estimate, "available_memory", lambda: 1 << 20)
-    monkeypatch.setattr(pipeline, "Accelerator", spy)
+    monkeypatch.setattr(preparation, "Accelerator", spy)
     scene = _room()
     settings = RenderSettings(samples=2, photons=2_000_000)
     for run in (render, bake):
@@ -368,7 +368,7 @@ def test_dry_run_prints_the_plan_and_table_and_writes_nothing(tmp_path, capfd):
 def test_render_panel_shows_the_estimate_of_the_current_settings():
     pytest.importorskip("bpy")
     import test_ui as ui
-    from lanterna.engine.blender import calibrate, export, registration
+    from lanterna.engine.blender import export, live_estimate, registration
     from lanterna.ui import panels
 
     was = registration.is_registered()
@@ -388,9 +388,9 @@ def test_render_panel_shows_the_estimate_of_the_current_settings():
         assert estimate.format_seconds(expected.seconds) in shown
         assert f"peak {estimate.format_bytes(expected.peak_bytes)}" in shown
         # A settings change shows at once (the facts are cached, the estimate recomputed).
-        before = calibrate.panel_estimate(ctx)[0].stages["camera"].counts["camera_rays"]
+        before = live_estimate.panel_estimate(ctx)[0].stages["camera"].counts["camera_rays"]
         scene.lanterna.samples *= 4
-        after = calibrate.panel_estimate(ctx)[0].stages["camera"].counts["camera_rays"]
+        after = live_estimate.panel_estimate(ctx)[0].stages["camera"].counts["camera_rays"]
         assert after == 4 * before
     finally:
         if not was:

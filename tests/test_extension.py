@@ -167,8 +167,15 @@ def test_linux_zip_is_valid_and_holds_the_addon_and_its_wheels(linux_zip):
                          "engine/blender/render_engine.py", "ui/panels.py", "ops/bake.py"):
             assert required in names
         top = {n.split("/")[0] for n in names}
-        assert not top & {"tests", "tools", "docs", "out", "build", "dist", "Makefile",
+        assert not top & {"tests", "tools", "docs", "bench", "out", "build", "dist", "Makefile",
                           "pyproject.toml", ".gitignore", ".ci"}, sorted(top)
+        # No benchmark or calibration module rides along anywhere (issue 20): the zip's
+        # Python files are the add-on's, none of bench/'s names.
+        bench_names = {p.name for p in (ROOT / "bench").glob("*.py")} - {"__init__.py"}
+        benchmarks = [n for n in names if n.endswith(".py") and (
+            n.split("/")[-1] in bench_names or "bench" in n.split("/")[-1]
+            or "calibrat" in n)]
+        assert benchmarks == [], benchmarks
         assert not [n for n in names if "__pycache__" in n or n.endswith(".pyc")]
         wheels = sorted(n for n in names if n.startswith("wheels/"))
         assert wheels == sorted(f"wheels/{w}" for w in linux_zip["wheels"])

@@ -99,20 +99,20 @@ def _plate_under_a_spot():
 
 def test_uncovered_samples_share_batch_local_records(monkeypatch):
     """Camera samples no record covers (edges, the gaps the neighbour check leaves) make
-    records of their own within their batch (``pipeline.LOCAL_STEPS``) instead of a gather
+    records of their own within their batch (``indirect.LOCAL_STEPS``) instead of a gather
     each. On the indirect-shadow scene (8 spp, a = 0.3), against a gather at every uncovered
     sample (``LOCAL_STEPS = ()``), seeds 3-8: 0.20-0.41 of the gathers (mean 0.28, SD 0.08)
     and the worst 4 x 4 block 0.05-0.25 % apart (mean 0.13 %, SD 0.08 %). Bounds: at most
     0.6 of the gathers and 0.5 % (both about mean + 4 SD); the same picture twice (the local
     records do not depend on the order batches finish)."""
-    from lanterna.engine import pipeline
+    from lanterna.engine import indirect
 
     scene = _plate_under_a_spot()
     settings = RenderSettings(indirect="cache", cache_error=0.3,
                               **{**BASE, "samples": 8, "seed": 5})
     local = render(scene, settings)
     again = render(scene, settings)
-    monkeypatch.setattr(pipeline, "LOCAL_STEPS", ())
+    monkeypatch.setattr(indirect, "LOCAL_STEPS", ())
     each = render(scene, settings)
     cam, cam_each = local.report["stages"]["camera"], each.report["stages"]["camera"]
     assert cam["cache_local_records"] > 0 and cam_each["cache_local_records"] == 0
@@ -153,16 +153,16 @@ def test_photon_guided_gather_is_unbiased_and_less_noisy():
     with as many rays: per-point indirect irradiance on the room's back wall, 64 points x 40
     repeats; guided 4 x 16 + 64 extra rays against plain 4 x 16 and 4 x 32. Measured spread
     (mean per-point SD): plain 4 x 16 0.117, plain 4 x 32 0.075, guided 0.065."""
-    from lanterna.engine import pipeline as P
     from lanterna.engine.accel import Accelerator
     from lanterna.engine.gather import RadianceEstimates, final_gather
     from lanterna.engine.photons import auto_max_radius, build_photon_map
+    from lanterna.engine.surfaces import SceneSurfaces
 
     scene = _room().validate()
     accel = Accelerator(scene.triangles, threads=1)
     pmap = build_photon_map(scene, accel, 200_000, seed=5)
     estimates = RadianceEstimates.build(pmap, k=50, max_radius=auto_max_radius(scene, len(pmap), 50))
-    arrays = P._SceneArrays(scene)
+    arrays = SceneSurfaces(scene)
     points = np.column_stack([np.linspace(0.5, 3.5, 64), np.full(64, 3.99), np.linspace(0.3, 2.7, 64)])
     normals = np.tile([0.0, -1.0, 0.0], (64, 1))                # the back wall, facing the room
 

@@ -89,6 +89,12 @@ def test_full_mode_matches_cycles_with_all_bounces(name):
                          f"full mode, photon map at the hit ({SAMPLES} spp, {PHOTONS:,} photons)")
 
 
+# Tuning and validation (bench/validation.py, SCENE_ROLES; docs/validation.md): Scene 2 (and
+# Scene 1 for the estimate's fits) tuned the final preset's a = 0.1, the guided gather, the
+# cache's neighbour check and the batch-local records; their checks here are regressions of
+# what was tuned, and validate none of it. The Cornell boxes were never used to tune anything:
+# they are the validation.
+#
 # Scene 2 is lit almost only by light that bounced once off the inside of the lamp's tube, a
 # small patch 1000x brighter than the room, and the knot casts an "indirect shadow" of it on
 # the floor that Ward's error metric (geometric distances) does not foresee. It needs the

@@ -71,13 +71,14 @@ def test_direct_pass_is_the_direct_only_render_sample_for_sample():
 def test_projection_inverts_the_camera_rays():
     """A pixel centre's first hit projects back to that pixel (with a render border too)."""
     from lanterna.engine.accel import Accelerator
-    from lanterna.engine.pipeline import _SceneArrays, _centre_hits
+    from lanterna.engine.passes import centre_hits
+    from lanterna.engine.surfaces import SceneSurfaces
 
     scene = _room()
     scene.camera.border = (5, 4, 31, 22)
     scene.camera.__post_init__()
     accel = Accelerator(scene.triangles, threads=1)
-    hits = _centre_hits(scene, accel, _SceneArrays(scene))
+    hits = centre_hits(scene, accel, SceneSurfaces(scene))
     pixel, visible = P.visible_points(scene.camera, accel, hits.x)
     accel.close()
     np.testing.assert_array_equal(pixel, hits.pixel)

@@ -157,7 +157,8 @@ def lanterna_classes():
 
 def context_for(scene, engine=ENGINE, **data):
     base = dict(engine=engine, scene=scene, material=None, light=None, world=None,
-                object=None, camera=None, region=None)
+                object=None, camera=None, region=None,
+                view_layer=scene.view_layers[0] if scene is not None else None)
     base.update(data)
     return types.SimpleNamespace(**base)
 

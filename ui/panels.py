@@ -4,7 +4,7 @@ Every Lanterna panel shares :class:`LanternaPanel`: ``COMPAT_ENGINES = {'LANTERN
 poll on ``context.engine``, so they show only while Lanterna is the scene's render engine.
 Sub-panels hang under their parent with ``bl_parent_id``; properties are drawn with
 ``use_property_split``; a panel that switches a feature on carries the switch in its header
-(``draw_header``). Settings that the chosen quality preset sets (``pipeline.PRESETS``) are
+(``draw_header``). Settings that the chosen quality preset sets (``settings.PRESETS``) are
 greyed out; so are settings the current mode or method does not use.
 
 Render (``scene.lanterna``)
@@ -24,7 +24,7 @@ Render (``scene.lanterna``)
       ``LANTERNA_RENDER_PT_last_render_plan``    every stage of the plan, run or skipped, and why
       ``LANTERNA_RENDER_PT_last_render_timings`` export and per-stage seconds, share of total
       ``LANTERNA_RENDER_PT_last_render_warnings`` the render's warnings
-    The Last Render panels read ``engine.blender.render_engine.LAST_RENDER``, which the
+    The Last Render panels read ``engine.blender.session.LAST_RENDER``, which the
     RenderEngine fills at the end of every render (the pipeline's report, warnings, error,
     export and total seconds).
 Material (``material.lanterna``)
@@ -58,6 +58,8 @@ import math
 import textwrap
 
 import bpy
+
+from ..engine.blender import session
 
 ENGINE_ID = "LANTERNA"
 MAX_LISTED_LIGHTS = 12      # area lights listed in the Shadow Photons panel
@@ -100,10 +102,10 @@ def _wrap(layout, text: str, context=None, icon: str = 'NONE', alert: bool = Fal
 
 # -- Presets ----------------------------------------------------------------------------------
 def preset_overrides(settings) -> dict:
-    """The settings the chosen preset sets, as ``pipeline.PRESETS`` has them ({} for Custom)."""
+    """The settings the chosen preset sets, as ``settings.PRESETS`` has them ({} for Custom)."""
     if settings.preset == 'CUSTOM':
         return {}
-    from ..engine.pipeline import PRESETS
+    from ..engine.settings import PRESETS
     return dict(PRESETS.get(settings.preset.lower(), {}))
 
 
@@ -168,12 +170,12 @@ class LANTERNA_RENDER_PT_estimate(LanternaRenderPanel, bpy.types.Panel):
     """Issue 6: the estimated time and memory of each stage for the current settings, before
     rendering (``engine/estimate.py``). The scene's facts are cached under a cheap depsgraph
     signature and the estimate recomputed from them at each redraw
-    (``engine/blender/calibrate.py``, ``panel_estimate``)."""
+    (``engine/blender/live_estimate.py``, ``panel_estimate``)."""
     bl_label = "Estimate"
     bl_parent_id = "LANTERNA_RENDER_PT_sampling"
 
     def draw(self, context):
-        from ..engine.blender.calibrate import panel_estimate
+        from ..engine.blender.live_estimate import panel_estimate
         from ..engine.estimate import DEFAULT_RATES_PATH, GIB, format_bytes, format_seconds
 
         layout = self.layout
@@ -322,8 +324,7 @@ def stage_title(name: str) -> str:
 
 def last_render() -> dict:
     """The RenderEngine's record of the last render (empty before the first)."""
-    from ..engine.blender import render_engine
-    return render_engine.LAST_RENDER
+    return session.LAST_RENDER
 
 
 def plan_rows(report: dict) -> list[tuple[str, bool, str]]:
@@ -684,6 +685,25 @@ class LANTERNA_WORLD_PT_surface(_SurfacePanel, bpy.types.Panel):
     bl_context = "world"
 
 
+# -- View layer: passes ------------------------------------------------------------------------
+class LANTERNA_VIEW_LAYER_PT_passes(LanternaPanel, bpy.types.Panel):
+    bl_label = "Passes"
+    bl_context = "view_layer"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        settings = context.view_layer.lanterna_passes
+        col = layout.column(heading="Light", align=True)
+        for prop in ("direct", "indirect", "emission"):
+            col.prop(settings, prop)
+        col = layout.column(heading="Method", align=True)
+        for prop in ("photon_map", "photons", "cache_points", "cache_usage", "shadow_classes"):
+            col.prop(settings, prop)
+
+
+
 classes = (
     LANTERNA_RENDER_PT_sampling,
     LANTERNA_RENDER_PT_sampling_advanced,
@@ -702,6 +722,7 @@ classes = (
     LANTERNA_LIGHT_PT_light,
     LANTERNA_LIGHT_PT_photons,
     LANTERNA_WORLD_PT_surface,
+    LANTERNA_VIEW_LAYER_PT_passes,
 )
 
 
@@ -759,7 +780,7 @@ def builtin_panels() -> list[type]:
 
 
 def register():
-    from ..engine.blender.registration import register_classes
+    from ..engine.blender.classes import register_classes
     register_classes(classes)
     for panel in builtin_panels():
         if ENGINE_ID not in panel.COMPAT_ENGINES:
@@ -775,5 +796,5 @@ def unregister():
         engines = panel.__dict__.get("COMPAT_ENGINES")
         if isinstance(engines, set) and not panel.__name__.startswith("LANTERNA_"):
             engines.discard(ENGINE_ID)
-    from ..engine.blender.registration import unregister_classes
+    from ..engine.blender.classes import unregister_classes
     unregister_classes(classes)

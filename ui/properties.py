@@ -3,7 +3,7 @@
 ``Scene.lanterna``     render settings (sampling, photons, indirect light: final gather and
                        irradiance cache, shadow photons); the exporter
                        (``engine/blender/export.py``) is the only reader that turns them into
-                       ``pipeline.RenderSettings``.
+                       ``settings.RenderSettings``.
 ``Material.lanterna``  the seed's three radiometric properties (section 3.2): diffuse
                        reflectance rho_d, specular reflectance rho_s (both per RGB channel, in
                        [0, 1]) and radiant exitance M [W/m^2]; by default derived from the
@@ -11,9 +11,10 @@
 ``Light.lanterna``     per-light settings for the photon stages: the light's share of the
                        photon budget and whether shadow photons (seed 7.2, 9.6) leave it.
 
-Every property carries a description, limits and a subtype. Names are part of the contract
-with the exporter: a ``Scene.lanterna`` property whose name is a field of
-``pipeline.RenderSettings`` reaches the core under that name (``export.export_settings``);
+Every property carries a description, limits and a subtype. ``Scene.lanterna`` takes every
+label, description, default, minimum and maximum from ``engine/settings.py`` (the one source
+the command line and ``RenderSettings.validate`` read too): a property whose name is a field
+of ``settings.RenderSettings`` reaches the core under that name (``export.export_settings``);
 ``Light.lanterna`` is read by ``export.export_scene``. Do not rename them.
 ``use_irradiance_cache`` stores nothing: it reads and writes ``indirect`` (on: ``CACHE``; off:
 ``GATHER``), so that the Irradiance Cache panel can carry its switch in its header as Cycles'
@@ -21,11 +22,15 @@ panels do. Material and light properties tag their data block when they change, 
 evaluated depsgraph (viewport, scripts) sees the new value; F12 builds a fresh one anyway.
 """
 
+import dataclasses
+
 import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty,
                        IntProperty, PointerProperty)
 
-INT_MAX = 2 ** 31 - 1
+from ..engine.settings import SETTINGS, RenderSettings
+
+RENDER_DEFAULTS = dataclasses.asdict(RenderSettings())
 
 
 def _tag_owner(self, _context) -> None:
@@ -43,148 +48,43 @@ def _set_use_cache(self, value: bool) -> None:
         self.indirect = 'CACHE' if value else 'GATHER'
 
 
+def _enum_id(core_name: str) -> str:
+    """A core choice ('photon-map') as Blender's enum identifier ('PHOTON_MAP')."""
+    return core_name.upper().replace("-", "_")
+
+
+def setting_property(name: str):
+    """The Blender property of render setting ``name``, built from its contract in
+    ``engine/settings.py`` (label, description, default, limits, unit): the one source."""
+    spec = SETTINGS[name]
+    default = RENDER_DEFAULTS[name]
+    common = dict(name=spec.label, description=spec.description)
+    if spec.choices:
+        return EnumProperty(items=tuple((_enum_id(c), label, desc) for c, label, desc in spec.choices),
+                            default=_enum_id(default), **common)
+    if isinstance(default, bool):
+        return BoolProperty(default=default, **common)
+    limits = dict(min=spec.minimum, max=spec.maximum,
+                  soft_max=spec.soft_max if spec.soft_max is not None else spec.maximum)
+    if isinstance(default, int):
+        return IntProperty(default=default, subtype='NONE', **limits, **common)
+    return FloatProperty(default=default, subtype=spec.unit, precision=spec.precision or 3,
+                         **limits, **common)
+
+
 class LanternaSceneSettings(bpy.types.PropertyGroup):
     """Render settings of one scene (Properties editor > Render: Sampling, Photons, Indirect
-    Light, Shadow Photons)."""
+    Light, Shadow Photons): one property per exposed field of ``settings.RenderSettings``,
+    each built from that field's contract (``setting_property``)."""
 
-    mode: EnumProperty(
-        name="Mode",
-        description="How light is computed",
-        items=(
-            ('FULL', "Full", "Exact direct light plus indirect light from the photon map"),
-            ('PHOTON_MAP', "Photon Map",
-             "All light from the photon map, seen directly (fast, noisy; seed section 9.5)"),
-        ),
-        default='FULL',
-    )
-    samples: IntProperty(
-        name="Samples",
-        description="Camera samples per pixel",
-        default=16, min=1, max=65536, soft_max=4096, subtype='NONE',
-    )
-    light_samples: IntProperty(
-        name="Light Samples",
-        description="Samples per area/mesh/world light per camera hit",
-        default=4, min=1, max=65536, soft_max=256, subtype='NONE',
-    )
-    bounces: IntProperty(
-        name="Max Bounces",
-        description=("Most bounces of light between surfaces (0 = direct light only); photon "
-                     "paths end after this many"),
-        default=128, min=0, max=255, soft_max=128, subtype='NONE',
-    )
-    photons: IntProperty(
-        name="Photons",
-        description="Photons emitted from the lights (0 = automatic: two per pixel, 200k-2M)",
-        default=0, min=0, max=50_000_000, soft_max=10_000_000, subtype='NONE',
-    )
-    photon_k: IntProperty(
-        name="Photons per Estimate",
-        description="Nearest photons in each radiance estimate (Eq. 9.11)",
-        default=50, min=1, max=10_000, soft_max=500, subtype='NONE',
-    )
-    photon_radius: FloatProperty(
-        name="Max Radius",
-        description=("Largest radius of a photon estimate (0 = automatic, from the scene's "
-                     "area and the photon count)"),
-        default=0.0, min=0.0, max=1.0e6, soft_max=10.0, precision=4, subtype='DISTANCE',
-    )
-    photon_filter: EnumProperty(
-        name="Filter",
-        description="Weighting of the photons in an estimate",
-        items=(
-            ('NONE', "None", "Every photon in the disc counts fully"),
-            ('CONE', "Cone", "Nearer photons count more (Jensen's cone filter, k = 1.1): "
-                             "sharper edges, a little more noise"),
-        ),
-        default='NONE',
-    )
-    preset: EnumProperty(
-        name="Preset",
-        description="Quality preset: sets photons, gather, cache error and samples together",
-        items=(
-            ('CUSTOM', "Custom", "Use the settings below"),
-            ('PREVIEW', "Preview", "Fast: 4 spp, 200k photons, gather 6x24, cache error 0.3"),
-            ('FINAL', "Final", "16 spp, 1M photons, gather 12x48, cache error 0.1"),
-        ),
-        default='CUSTOM',
-    )
-    indirect: EnumProperty(
-        name="Indirect",
-        description="How the full mode computes indirect light",
-        items=(
-            ('CACHE', "Irradiance Cache", "Final gather at cached records, interpolated with "
-                                          "gradients (seed chapter 10)"),
-            ('GATHER', "Final Gather", "A final gather at every looked-up sample (slow, "
-                                        "reference quality)"),
-            ('PHOTON_MAP', "Photon Map", "The photon map's estimate at the hit (fast, blotchy)"),
-        ),
-        default='CACHE',
-    )
-    gather_m: IntProperty(
-        name="Gather Theta",
-        description="Final gather: strata in the polar angle (M of M x N rays)",
-        default=8, min=1, max=256, soft_max=64, subtype='NONE',
-    )
-    gather_n: IntProperty(
-        name="Gather Phi",
-        description="Final gather: strata in the azimuth (N of M x N rays)",
-        default=32, min=1, max=1024, soft_max=256, subtype='NONE',
-    )
-    gather_guided: FloatProperty(
-        name="Guided Rays",
-        description=("Final gather: extra rays, as a multiple of M x N, steered into the "
-                     "directions nearby photons came from (Jensen 1995); 0 = off"),
-        default=1.0, min=0.0, max=64.0, soft_max=8.0, precision=2, subtype='NONE',
-    )
-    cache_error: FloatProperty(
-        name="Cache Error",
-        description="Irradiance cache: largest error a; records are used where w > 1/a (Eq. 10.3)",
-        default=0.2, min=0.01, max=10.0, soft_max=1.0, precision=3, subtype='NONE',
-    )
-    cache_gradients: BoolProperty(
-        name="Gradients",
-        description=("Irradiance cache: extrapolate each record with its rotation and "
-                     "translation gradients (Ward and Heckbert 1992, Eq. 10.5); off: plain "
-                     "weighted average of the records"),
-        default=True,
-    )
-    cache_refine: BoolProperty(
-        name="Refine at Contrasts",
-        description=("Irradiance cache: records whose extrapolation a neighbouring record's "
-                     "gather contradicts reach less far, so indirect shadows and sharp "
-                     "changes get records of their own; off: records placed by Ward's "
-                     "geometric weight only"),
-        default=True,
-    )
-    use_irradiance_cache: BoolProperty(
+    __annotations__ = {name: setting_property(name) for name, spec in SETTINGS.items()
+                       if spec.exposed}
+    __annotations__["use_irradiance_cache"] = BoolProperty(
         name="Irradiance Cache",
         description=("Interpolate the final gather between cached records (Indirect = "
                      "Irradiance Cache); off: a final gather at every looked-up sample "
                      "(Indirect = Final Gather)"),
         get=_get_use_cache, set=_set_use_cache,
-    )
-    shadow_photons: BoolProperty(
-        name="Shadow Photons",
-        description="Classify lit, penumbra and umbra with shadow photons to save shadow rays",
-        default=True,
-    )
-    photon_lookups: IntProperty(
-        name="Lookups per Pixel",
-        description=("Camera samples per pixel that ask the photon map; their estimate stands "
-                     "for the pixel's other samples (0 = automatic: about 300k look-ups per "
-                     "image)"),
-        default=0, min=0, max=65536, soft_max=64, subtype='NONE',
-    )
-    seed: IntProperty(
-        name="Seed",
-        description="Seed of the random sequences; the same seed gives the same image",
-        default=0, min=0, max=INT_MAX, subtype='NONE',
-    )
-    threads: IntProperty(
-        name="Threads",
-        description="Worker threads (0 = automatic: one per CPU core)",
-        default=0, min=0, max=1024, soft_max=64, subtype='NONE',
     )
 
 
@@ -244,7 +144,7 @@ _POINTERS = (
 
 
 def register():
-    from ..engine.blender.registration import register_classes
+    from ..engine.blender.classes import register_classes
     register_classes(classes)
     for owner, group, description in _POINTERS:
         owner.lanterna = PointerProperty(type=group, name="Lanterna", description=description)
@@ -254,5 +154,5 @@ def unregister():
     for owner, _group, _description in reversed(_POINTERS):
         if hasattr(owner, "lanterna"):
             del owner.lanterna
-    from ..engine.blender.registration import unregister_classes
+    from ..engine.blender.classes import unregister_classes
     unregister_classes(classes)

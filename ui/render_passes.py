@@ -7,7 +7,8 @@ RenderEngine registers the ticked ones in ``update_render_passes`` (they then ap
 Image Editor's pass menu, in the compositor's Render Layers node and in multilayer EXRs, as
 Cycles' passes do) and fills them after the render. The checkboxes sit in View Layer
 properties > Passes (grouped Light / Method, like Cycles' pass panels); changing one
-calls ``ViewLayer.update_render_passes()`` so the compositor's sockets follow at once.
+calls ``ViewLayer.update_render_passes()`` so the compositor's sockets follow at once. (The
+panel with the checkboxes is ``ui/panels.py``'s ``LANTERNA_VIEW_LAYER_PT_passes``.)
 """
 from __future__ import annotations
 
@@ -15,7 +16,6 @@ import bpy
 from bpy.props import BoolProperty
 
 from ..engine.passes import PASS_NAMES, PASSES
-from .panels import LanternaPanel
 
 # property name -> (pass name, label, description)
 PASS_PROPERTIES = {
@@ -60,32 +60,12 @@ def enabled_passes(view_layer) -> list[str]:
     return [name for prop, (name, _l, _d) in PASS_PROPERTIES.items() if getattr(settings, prop)]
 
 
-class LANTERNA_VIEW_LAYER_PT_passes(LanternaPanel, bpy.types.Panel):
-    bl_label = "Passes"
-    bl_context = "view_layer"
-
-    def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
-        settings = context.view_layer.lanterna_passes
-        col = layout.column(heading="Light", align=True)
-        for prop in ("direct", "indirect", "emission"):
-            col.prop(settings, prop)
-        col = layout.column(heading="Method", align=True)
-        for prop in ("photon_map", "photons", "cache_points", "cache_usage", "shadow_classes"):
-            col.prop(settings, prop)
-
-
 def register():
     bpy.utils.register_class(LanternaPassSettings)
     bpy.types.ViewLayer.lanterna_passes = bpy.props.PointerProperty(type=LanternaPassSettings)
-    bpy.utils.register_class(LANTERNA_VIEW_LAYER_PT_passes)
 
 
 def unregister():
-    if getattr(LANTERNA_VIEW_LAYER_PT_passes, "is_registered", False):
-        bpy.utils.unregister_class(LANTERNA_VIEW_LAYER_PT_passes)
     if hasattr(bpy.types.ViewLayer, "lanterna_passes"):
         del bpy.types.ViewLayer.lanterna_passes
     if getattr(LanternaPassSettings, "is_registered", False):

@@ -61,7 +61,7 @@ def _items(kind):
 
 
 def _redraw(_self, _context):
-    session._redraw_viewports()
+    session.redraw_viewports()
 
 
 class LanternaOverlaySettings(bpy.types.PropertyGroup):
@@ -158,14 +158,14 @@ classes = (LanternaOverlaySettings, LANTERNA_VIEW3D_PT_maps)
 
 
 def register():
-    from ..engine.blender.registration import register_classes
+    from ..engine.blender.classes import register_classes
     register_classes(classes)
     bpy.types.Scene.lanterna_overlay = PointerProperty(type=LanternaOverlaySettings)
     overlay_draw.register()
 
 
 def unregister():
-    from ..engine.blender.registration import unregister_classes
+    from ..engine.blender.classes import unregister_classes
     overlay_draw.unregister()
     if hasattr(bpy.types.Scene, "lanterna_overlay"):
         del bpy.types.Scene.lanterna_overlay

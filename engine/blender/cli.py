@@ -38,7 +38,8 @@ Usage
     Builds a seed scene (``engine/blender/seed_scenes.py``) and saves it.
 
 ``lanterna bench [...]``
-    Hands its arguments to the benchmark module's ``main``.
+    Hands its arguments to ``bench/main.py``'s ``main`` (a checkout's benchmarks; an installed
+    add-on has none and says so).
 
 Errors in the input (bad flags, a missing or unreadable .blend, an output that cannot be
 written, a scene the exporter rejects) end with one line ``lanterna: error: ...`` on stderr
@@ -54,10 +55,14 @@ import contextlib
 import json
 import os
 import signal
+import dataclasses
 import sys
 import time
 
+from ..settings import SETTINGS, RenderSettings
+
 PROG = "lanterna"
+RENDER_DEFAULTS = dataclasses.asdict(RenderSettings())
 SEED_SCENES = ("scene1", "scene2")
 BLEND_MAGIC = (b"BLENDER", b"\x28\xb5\x2f\xfd", b"\x1f\x8b")  # plain, zstd, gzip
 EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_CANCELLED = 0, 1, 2, 130
@@ -87,14 +92,15 @@ def _int_at_least(lowest: int, highest: int | None = None):
     return parse
 
 
-def _float_at_least(lowest: float):
+def _float_between(lowest: float, highest: float):
     def parse(text: str) -> float:
         try:
             value = float(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-        if not (value >= lowest and value < float("inf")):
-            raise argparse.ArgumentTypeError(f"must be a finite number >= {lowest}, got {text}")
+        if not (lowest <= value <= highest):
+            raise argparse.ArgumentTypeError(f"must be a number between {lowest:g} and "
+                                             f"{highest:g}, got {text}")
         return value
     parse.__name__ = "number"
     return parse
@@ -106,8 +112,11 @@ def _grid(text: str) -> tuple[int, int]:
         m, n = (int(p) for p in parts)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected MxN such as 8x32, got {text!r}") from None
-    if not (1 <= m <= 256 and 1 <= n <= 1024):
-        raise argparse.ArgumentTypeError(f"M must be 1-256 and N 1-1024, got {text}")
+    (m_lo, m_hi), (n_lo, n_hi) = ((SETTINGS[k].minimum, SETTINGS[k].maximum)
+                                  for k in ("gather_m", "gather_n"))
+    if not (m_lo <= m <= m_hi and n_lo <= n <= n_hi):
+        raise argparse.ArgumentTypeError(f"M must be {m_lo:g}-{m_hi:g} and N {n_lo:g}-{n_hi:g}, "
+                                         f"got {text}")
     return m, n
 
 
@@ -170,6 +179,23 @@ def _passes(text: str):
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def _setting_flag(parser, name: str) -> None:
+    """``--name`` for render setting ``name``, with its limits, choices, description and
+    default from ``engine/settings.py`` (the contract Blender's properties follow too)."""
+    spec, default = SETTINGS[name], RENDER_DEFAULTS[name]
+    flag = "--" + name.replace("_", "-")
+    text = f"{spec.description} (default {default})"
+    if spec.choices:
+        parser.add_argument(flag, choices=tuple(c[0] for c in spec.choices), default=None,
+                            help=text)
+    elif isinstance(default, int):
+        parser.add_argument(flag, type=_int_at_least(int(spec.minimum), int(spec.maximum)),
+                            metavar="N", help=text)
+    else:
+        parser.add_argument(flag, type=_float_between(spec.minimum, spec.maximum), metavar="X",
+                            help=text)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog=PROG, description="Lanterna: photon-mapping renderer for Blender scenes.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
@@ -196,47 +222,21 @@ def build_parser() -> argparse.ArgumentParser:
                              "shadow-classes, cache-usage, or all")
     render.add_argument("--resolution", type=_resolution, metavar="WxH",
                         help="full-frame size in pixels (percentage set to 100)")
-    render.add_argument("--samples", type=_int_at_least(1, 65536), metavar="N",
-                        help="camera samples per pixel")
-    render.add_argument("--light-samples", type=_int_at_least(1, 65536), metavar="N",
-                        help="samples per area/mesh/world light per camera hit")
-    render.add_argument("--bounces", type=_int_at_least(0, 255), metavar="N",
-                        help="most bounces of light (0 = direct light only; default 64)")
-    render.add_argument("--mode", choices=("full", "photon-map"), default=None,
-                        help="full: exact direct + photon-map indirect (default); photon-map: "
-                             "the photon map seen directly")
-    render.add_argument("--photons", type=_int_at_least(0, 50_000_000), metavar="N",
-                        help="photons emitted (0 = automatic: 2 per pixel, 200k-2M)")
-    render.add_argument("--photon-k", type=_int_at_least(1, 10_000), metavar="N",
-                        help="photons per radiance estimate (default 50)")
-    render.add_argument("--photon-radius", type=_float_at_least(0.0), metavar="R",
-                        help="largest estimate radius in metres (0 = automatic)")
-    render.add_argument("--photon-filter", choices=("none", "cone"), default=None,
-                        help="photon weighting in an estimate (default none)")
-    render.add_argument("--preset", choices=("custom", "preview", "final"), default=None,
-                        help="quality preset (photons, gather, cache error, samples together)")
-    render.add_argument("--indirect", choices=("cache", "gather", "photon-map"), default=None,
-                        help="full mode's indirect light: irradiance cache, a final gather at "
-                             "every sample, or the photon map at the hit")
+    for name in ("samples", "light_samples", "bounces", "mode", "photons", "photon_k",
+                 "photon_radius", "photon_filter", "preset", "indirect"):
+        _setting_flag(render, name)
     render.add_argument("--gather", type=_grid, metavar="MxN",
-                        help="final gather strata: M in theta x N in phi (default 8x32)")
-    render.add_argument("--gather-guided", type=_float_at_least(0.0), metavar="X",
-                        help="extra gather rays, X times M x N, steered by nearby photons "
-                             "(default 1; 0 = off)")
-    render.add_argument("--cache-error", type=_float_at_least(0.01), metavar="A",
-                        help="irradiance cache error a (default 0.2)")
+                        help="final gather strata: M in theta x N in phi (default "
+                             f"{RENDER_DEFAULTS['gather_m']}x{RENDER_DEFAULTS['gather_n']})")
+    for name in ("gather_guided", "cache_error"):
+        _setting_flag(render, name)
     render.add_argument("--no-shadow-photons", action="store_true",
                         help="trace every shadow ray (no lit/umbra classification)")
     render.add_argument("--no-cache-refine", action="store_true",
                         help="place cache records by Ward's geometric weight only (no check "
                              "against the neighbours' gathers)")
-    render.add_argument("--photon-lookups", type=_int_at_least(0, 65536), metavar="N",
-                        help="camera samples per pixel that ask the photon map (0 = automatic: "
-                             "about 300k look-ups per image)")
-    render.add_argument("--seed", type=_int_at_least(0, 2 ** 31 - 1), metavar="N",
-                        help="random seed")
-    render.add_argument("--threads", type=_int_at_least(0, 1024), metavar="N",
-                        help="worker threads (0 = one per core)")
+    for name in ("photon_lookups", "seed", "threads"):
+        _setting_flag(render, name)
     render.add_argument("--quiet", action="store_true", help="no progress line")
     render.add_argument("--dry-run", action="store_true",
                         help="print the plan and each stage's estimated time and memory, "
@@ -282,7 +282,7 @@ def _check_output(path: str, suffix: str, flag: str) -> str:
     return path
 
 
-def _check_blend(path: str) -> str:
+def check_blend(path: str) -> str:
     path = os.path.abspath(os.path.expanduser(path))
     if not os.path.exists(path):
         raise UsageError(f"{path}: no such file")
@@ -305,7 +305,7 @@ def _ensure_registered():
     registration.register()  # idempotent
 
 
-def _open_blend(path: str):
+def open_blend(path: str):
     import bpy
 
     try:
@@ -332,7 +332,7 @@ def _apply_overrides(scene, args) -> None:
     if args.cache_error is not None:
         settings.cache_error = args.cache_error
     if args.gather_guided is not None:
-        settings.gather_guided = min(args.gather_guided, 64.0)
+        settings.gather_guided = args.gather_guided
     if args.no_cache_refine:
         settings.cache_refine = False
     if args.no_shadow_photons:
@@ -433,7 +433,7 @@ def cmd_render(args) -> int:
         outputs["report"] = _check_output(args.report, ".json", "--report")
     if len(set(outputs.values())) != len(outputs):
         raise UsageError("the output files must be different")
-    blend = _check_blend(args.blend) if args.blend else None
+    blend = check_blend(args.blend) if args.blend else None
 
     # 2. Load the scene.
     import bpy  # noqa: F401  (slow import, only now)
@@ -444,7 +444,7 @@ def cmd_render(args) -> int:
 
     _ensure_registered()
     t0 = time.perf_counter()
-    scene = _open_blend(blend) if blend else seed_scenes.build(args.scene or "scene1")
+    scene = open_blend(blend) if blend else seed_scenes.build(args.scene or "scene1")
     _apply_overrides(scene, args)
     load_seconds = time.perf_counter() - t0
 
@@ -544,14 +544,14 @@ def cmd_render(args) -> int:
 def _dry_run(args) -> int:
     """``render --dry-run``: export as a render would, print the plan and the estimate of each
     stage (``engine/estimate.py``), render and write nothing."""
-    blend = _check_blend(args.blend) if args.blend else None
+    blend = check_blend(args.blend) if args.blend else None
     import bpy  # noqa: F401
     from ..scene import SceneError
     from .. import estimate
     from . import export, seed_scenes
 
     _ensure_registered()
-    scene = _open_blend(blend) if blend else seed_scenes.build(args.scene or "scene1")
+    scene = open_blend(blend) if blend else seed_scenes.build(args.scene or "scene1")
     _apply_overrides(scene, args)
     resolution = export.render_resolution(scene.render)
     if resolution[0] < 1 or resolution[1] < 1:
@@ -649,21 +649,21 @@ def cmd_tonemap(args) -> int:
     return EXIT_OK
 
 
-def cmd_bench(argv: list[str]) -> int:
-    bench_main = None
-    import importlib
+BENCH_PACKAGE = __package__.rsplit(".", 2)[0] + ".bench"    # lanterna.bench: the checkout's
 
-    for module in (".bench", "..bench"):          # relative: also inside the Blender extension
-        try:
-            bench_main = importlib.import_module(module, __package__).main
-            break
-        except (ImportError, AttributeError):
-            continue
-    if bench_main is None:
-        raise UsageError("the benchmarks are not available in this build "
-                         "(no engine/blender/bench.py or engine/bench.py with main(argv))")
-    code = bench_main(argv)
-    return int(code or 0)
+
+def cmd_bench(argv: list[str]) -> int:
+    """``lanterna bench ...``: the benchmarks live outside the add-on, in the checkout's
+    ``bench/`` folder (``lanterna.bench`` in a development install); they are found by name
+    when present, so that nothing in the add-on depends on them."""
+    import importlib
+    import importlib.util
+
+    if importlib.util.find_spec(BENCH_PACKAGE) is None:
+        raise UsageError("the benchmarks are not part of an installed add-on: run "
+                         "'lanterna bench' from a checkout of Lanterna (make render sets one up)")
+    bench_main = importlib.import_module(BENCH_PACKAGE + ".main").main
+    return int(bench_main(argv) or 0)
 
 
 def main(argv=None) -> int:

@@ -97,7 +97,7 @@ dropped by :meth:`Scene.validate`. Warnings are deduplicated and kept in ``Scene
 ``Scene.stats`` holds the export time and counts.
 
 :func:`export_settings` turns ``Scene.lanterna`` (any nested property groups included) into
-:class:`lanterna.engine.pipeline.RenderSettings`, falling back on that class's defaults.
+:class:`lanterna.engine.settings.RenderSettings`, falling back on that class's defaults.
 """
 from __future__ import annotations
 
@@ -110,12 +110,12 @@ import numpy as np
 
 import bpy
 
-from ..pipeline import RenderSettings
+from ..settings import RenderSettings
 from . import compat
 from ..scene import (AREA_SHAPES, AreaLight, Camera, Material, PointLight, Scene, SceneError,
                      SpotLight, SunLight, World)
 
-__all__ = ["export_scene", "export_settings", "material_from_nodes", "benchmark_export"]
+__all__ = ["export_scene", "export_settings", "material_from_nodes"]
 
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
 UNSUPPORTED_TYPES = {"CURVES", "POINTCLOUD", "VOLUME", "GREASEPENCIL", "GPENCIL"}
@@ -952,50 +952,3 @@ def export_settings(blender_scene) -> RenderSettings:
         if key in values:
             values[key] = max(0, values[key])
     return RenderSettings(**values)
-
-
-# ---------------------------------------------------------------------------------------------
-# Benchmark
-# ---------------------------------------------------------------------------------------------
-def _grid_mesh(name: str, n_triangles: int):
-    """A flat grid of about ``n_triangles`` triangles built with foreach_set (fast)."""
-    n = max(1, int(math.ceil(math.sqrt(n_triangles / 2.0))))        # quads per side
-    xs = np.linspace(-1.0, 1.0, n + 1, dtype=np.float32)
-    gx, gy = np.meshgrid(xs, xs, indexing="xy")
-    co = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size, np.float32)], axis=1)
-    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="xy")
-    v0 = (j * (n + 1) + i).ravel()
-    quads = np.stack([v0, v0 + 1, v0 + n + 2, v0 + n + 1], axis=1).astype(np.int32)
-    mesh = bpy.data.meshes.new(name)
-    mesh.vertices.add(len(co))
-    mesh.vertices.foreach_set("co", co.ravel())
-    mesh.loops.add(quads.size)
-    mesh.loops.foreach_set("vertex_index", quads.ravel())
-    mesh.polygons.add(len(quads))
-    mesh.polygons.foreach_set("loop_start", np.arange(0, quads.size, 4, dtype=np.int32))
-    mesh.update()
-    return mesh
-
-
-def benchmark_export(n_triangles: int = 1_000_000) -> dict:
-    """Build a grid of about ``n_triangles`` triangles in a fresh Blender scene, export it and
-    return {'triangles', 'seconds' (export_scene wall time), 'build_seconds'}. Resets the
-    current Blender session (factory settings)."""
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    t0 = time.perf_counter()
-    scene = bpy.context.scene
-    mesh = _grid_mesh("Benchmark", n_triangles)
-    obj = bpy.data.objects.new("Benchmark", mesh)
-    obj.rotation_euler = (0.3, 0.2, 0.1)
-    scene.collection.objects.link(obj)
-    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    cam.location = (0.0, 0.0, 5.0)
-    scene.collection.objects.link(cam)
-    scene.camera = cam
-    depsgraph = bpy.context.evaluated_depsgraph_get()
-    build = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    exported = export_scene(depsgraph)
-    seconds = time.perf_counter() - t0
-    return {"triangles": int(len(exported.triangles)), "seconds": seconds,
-            "build_seconds": build}

@@ -38,11 +38,17 @@ import traceback
 import bpy
 import numpy as np
 
+from ...ui.render_passes import enabled_passes
+from .. import pipeline
+from ..artifacts import scene_fingerprint
+from ..scene import SceneError
+from . import export, session
+from .classes import register_classes, unregister_classes
+
 ENGINE_ID = "LANTERNA"
 
-#: The last render: {"report", "warnings", "error", "export_seconds", "total_time", "size",
-#: "border", "cancelled"}.
-LAST_RENDER: dict = {}
+#: The last render (``session.LAST_RENDER``, the same dict).
+LAST_RENDER: dict = session.LAST_RENDER
 
 
 def image_to_rect(image: np.ndarray, channels: int = 4) -> np.ndarray:
@@ -84,9 +90,6 @@ class LanternaRenderEngine(bpy.types.RenderEngine):
             LAST_RENDER.update(state)
 
     def _render_into(self, depsgraph, scene, width, height, result, state):
-        from .. import pipeline
-        from . import export
-
         win_w, win_h = result.resolution_x, result.resolution_y
         border = export.render_border(scene.render, (width, height))  # Blender's truncation
         if border is not None:
@@ -108,9 +111,8 @@ class LanternaRenderEngine(bpy.types.RenderEngine):
             if text:
                 self.update_stats("Lanterna", str(text))
 
-        from ...ui.render_passes import enabled_passes
         wanted = enabled_passes(depsgraph.view_layer) if depsgraph.view_layer else []
-        from . import session                # the maps stay for the viewport overlay
+        # The maps stay in the session for the viewport overlay and the next render.
         reuse = self._reusable_maps(session.get(scene.name), lscene, settings)
         res = pipeline.render(lscene, settings, progress=progress, cancelled=self.test_break,
                               passes=wanted, artifacts=reuse)
@@ -143,7 +145,6 @@ class LanternaRenderEngine(bpy.types.RenderEngine):
         them and gives the same picture. Anything else: None (build afresh)."""
         if artifacts is None:
             return None
-        from ..artifacts import scene_fingerprint
         try:
             same = artifacts.fingerprint == scene_fingerprint(lscene, settings.resolved())
         except Exception:  # noqa: BLE001 - a scene the fingerprint cannot take: build afresh
@@ -154,7 +155,6 @@ class LanternaRenderEngine(bpy.types.RenderEngine):
     def update_render_passes(self, scene=None, renderlayer=None):
         """Tell Blender which passes the view layer gets (Combined is always there), so they
         show in the Image Editor, the compositor's Render Layers node and multilayer EXRs."""
-        from ...ui.render_passes import enabled_passes
         for name in enabled_passes(renderlayer):
             self.register_pass(scene, renderlayer, name, 3, "RGB", 'COLOR')
 
@@ -167,8 +167,6 @@ class LanternaRenderEngine(bpy.types.RenderEngine):
                 self.report({'WARNING'}, text)
 
     def _fail(self, exc: BaseException, state):
-        from ..scene import SceneError
-
         if isinstance(exc, SceneError):
             message = str(exc) or type(exc).__name__
         else:
@@ -185,10 +183,8 @@ classes = (LanternaRenderEngine,)
 
 
 def register():
-    from .registration import register_classes
     register_classes(classes)
 
 
 def unregister():
-    from .registration import unregister_classes
     unregister_classes(classes)

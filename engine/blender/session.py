@@ -10,11 +10,16 @@ What it holds
     kd-trees) until ``clear``, a new render of the scene, or Blender's exit; nothing is
     written into the .blend.
 
+``LAST_RENDER``: the last F12 render's report, warnings, error, export and total time, size,
+border and whether it was cancelled (``render_engine.py`` fills it; the Last Render panels and
+the panel's estimate read it).
+
 Functions
     ``put(scene_name, artifacts, source="render", path="")``  store (None clears);
     ``get(scene_name)`` -> Artifacts or None; ``info(scene_name)`` -> {"source", "path"};
     ``clear(scene_name=None)`` (None: every scene); ``version()``; ``names()``.
-    Each change asks the 3D viewports to redraw (skipped in background mode).
+    Each change asks the 3D viewports to redraw (``redraw_viewports``; skipped in background
+    mode).
 """
 from __future__ import annotations
 
@@ -24,14 +29,20 @@ _lock = threading.Lock()
 _store: dict = {}          # scene name -> {"artifacts", "source", "path"}
 _version = 0
 
+#: The last render: {"report", "warnings", "error", "export_seconds", "total_time", "size",
+#: "border", "cancelled"}.
+LAST_RENDER: dict = {}
+
 
 def _changed():
     global _version
     _version += 1
-    _redraw_viewports()
+    redraw_viewports()
 
 
-def _redraw_viewports():
+def redraw_viewports():
+    """Ask every 3D viewport to redraw (the overlay follows the maps); nothing in background
+    mode."""
     try:
         import bpy
     except ImportError:

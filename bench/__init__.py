@@ -1,0 +1,17 @@
+"""Lanterna's benchmarks and calibration: measurements, never tests (the machine is shared, so
+each prints ratios against a baseline measured in the same run). Not part of the add-on: the
+extension zips leave this folder out, and ``lanterna bench`` finds it only in a checkout.
+
+    ``main.py``              ``lanterna bench``: prints ``throughput.py``'s figures (stage
+                             times, rays against raw embreex in ``raw_embree.py``, export
+                             speed, photons, kd-tree look-ups); hands the flags below to
+                             their modules
+    ``calibrate.py``         ``--calibrate`` / ``--check-estimate``: this machine's rates for
+                             the cost estimate (``engine/estimate.py``) and their check
+    ``sweep.py``             ``--sweep``: quality settings against a reference and Cycles
+    ``vs_cycles.py``         ``--vs-cycles``: the ``final`` preset against Cycles
+    ``cache_index.py``       ``--cache-index``: the irradiance cache's grid against its kd-tree
+    ``validation.py``        ``--validation``: writes docs/validation.md
+    ``performance.py``       ``--performance``: writes docs/performance.md (runs the sweep)
+    ``fit_cache_counts.py``  refits the estimate's irradiance-cache counts from renders
+"""

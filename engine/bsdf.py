@@ -1,0 +1,228 @@
+"""Materials at hits: the parameters per hit and the BSDF they make, over arrays of hits.
+
+This is the seam every stage reads a material through (photon tracing, the final gather,
+direct light and camera shading): parameters are fetched per hit by one function,
+``MaterialTable.at(material_ids)``, so that textures can later feed the same slots, and the
+scattering is asked of lobes with one interface (pbrt's ``f`` / ``Sample_f`` / ``PDF``):
+
+    ``evaluate(wo, wi, n)``  BSDF value f [1/sr] (N, 3)
+    ``sample(wo, n, u)``     (wi, weight = f cos / pdf (N, 3), pdf [1/sr] (N,)) for (N, 2)
+                             uniform numbers ``u``
+    ``pdf(wo, wi, n)``       density of ``sample`` [1/sr] (N,)
+    ``albedo()``             directional albedo (N, 3): the share of light it reflects
+
+Directions are unit (N, 3) arrays pointing away from the surface (``wo`` towards the viewer,
+``wi`` towards the light), ``n`` the shading normal on ``wo``'s side.
+
+Today's materials are the seed's (section 3.2): a Lambertian lobe of reflectance rho_d
+(f = rho_d / pi) plus a perfect mirror of reflectance rho_s (a delta lobe: ``evaluate`` and
+``pdf`` are 0, ``sample`` returns the mirror direction with weight rho_s and pdf inf), and an
+exitance M [W/m^2] (radiance M / pi per emitting side). ``SurfaceBSDF`` composes the two lobes.
+
+``roulette_probabilities(rho_d, rho_s)`` is Russian roulette's choice between the lobes
+(seed 9.2, DESIGN.md §4): each lobe with the largest channel of its reflectance, both scaled by
+1 / (P_d + P_s) where that sum exceeds 1, so that a survivor's power, scaled by rho / P per
+channel, never grows in any channel.
+
+Parameters (per material, ``Scene.materials``; per hit after ``at``)
+    =================  =======  ===========================================================
+    name               unit     meaning
+    =================  =======  ===========================================================
+    diffuse            [0, 1]   rho_d per RGB channel (Lambertian reflectance)
+    specular           [0, 1]   rho_s per RGB channel (perfect mirror)
+    exitance           W/m^2    radiant exitance M per channel
+    emitted_radiance   W/m^2/sr L_e = M / pi per emitting side
+    both_sides         bool     emits from both faces (Cycles' Emission shader does)
+    =================  =======  ===========================================================
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from . import sampling
+
+__all__ = ["MaterialTable", "SurfaceParams", "Lambertian", "PerfectMirror", "SurfaceBSDF",
+           "roulette_probabilities", "reflect"]
+
+
+def roulette_probabilities(rho_d: np.ndarray, rho_s: np.ndarray):
+    """Russian roulette's probabilities (P_d, P_s) from the diffuse and specular reflectances
+    (K, 3): each the largest channel of its reflectance, both scaled by 1 / (P_d + P_s) where
+    that sum exceeds 1 (DESIGN.md §4). A survivor's power is scaled by rho / P per channel, so
+    no channel's weight grows (rho_c <= max rho = P). The seed's channel-averaged P let a
+    channel grow: rho = (0.9, 0.6, 0.3) gave P = 0.6 and red x1.5 a bounce, a red variance
+    series in 1.5^2 x 0.6 = 1.35 a bounce, which diverges."""
+    p_d = np.max(rho_d, axis=1) if len(rho_d) else np.zeros(0)
+    p_s = np.max(rho_s, axis=1) if len(rho_s) else np.zeros(0)
+    total = p_d + p_s
+    over = total > 1.0
+    if over.any():
+        p_d = np.where(over, p_d / np.where(over, total, 1.0), p_d)
+        p_s = np.where(over, p_s / np.where(over, total, 1.0), p_s)
+    return p_d, p_s
+
+
+def reflect(d: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Mirror direction of travel ``d`` about unit normals ``n`` (N, 3): d - 2 (d.n) n."""
+    return d - 2.0 * np.einsum("ij,ij->i", d, n)[:, None] * n
+
+
+class MaterialTable:
+    """The scene's materials as (M, 3) float64 arrays indexed by material id (the values as
+    the float32 ``Scene.material_table`` holds them), and what the planner asks of them."""
+
+    def __init__(self, scene):
+        table = scene.material_table()
+        self.diffuse = table["diffuse"].astype(np.float64)
+        self.specular = table["specular"].astype(np.float64)
+        self.exitance = table["exitance"].astype(np.float64)
+        self.emitted_radiance = self.exitance / np.pi
+        self.both_sides = table["both_sides"]
+        self.diffuse_over_pi = self.diffuse / np.pi
+        self.is_diffuse = np.any(self.diffuse > 0, axis=1)
+        self.is_specular = np.any(self.specular > 0, axis=1)
+        self.is_emissive = np.any(self.exitance > 0, axis=1)
+        self.has_specular = bool(self.is_specular.any())
+        self.has_emission = bool(self.is_emissive.any())
+        self.count = len(self.diffuse)
+        # Every parameter is one value per material (no textures yet): stages may then work
+        # on per-material tables (the camera's histogram of direct light per material).
+        self.constant_per_material = True
+
+    def at(self, material_ids: np.ndarray) -> "SurfaceParams":
+        """The parameters at hits on triangles of ``material_ids`` (N,): the one function
+        through which every stage reads a material."""
+        return SurfaceParams(self, np.asarray(material_ids))
+
+
+class SurfaceParams:
+    """Material parameters per hit (N,) or (N, 3), each fetched when first asked for."""
+
+    def __init__(self, table: MaterialTable, material: np.ndarray):
+        self.table = table
+        self.material = material            # (N,) material ids (per-material fast paths)
+        self._cache = {}
+
+    def __len__(self):
+        return len(self.material)
+
+    def _take(self, name):
+        if name not in self._cache:
+            self._cache[name] = np.take(getattr(self.table, name), self.material, axis=0)
+        return self._cache[name]
+
+    diffuse = property(lambda self: self._take("diffuse"))
+    specular = property(lambda self: self._take("specular"))
+    exitance = property(lambda self: self._take("exitance"))
+    diffuse_over_pi = property(lambda self: self._take("diffuse_over_pi"))
+    emitted_radiance = property(lambda self: self._take("emitted_radiance"))
+    both_sides = property(lambda self: self._take("both_sides"))
+    is_diffuse = property(lambda self: self._take("is_diffuse"))
+    is_specular = property(lambda self: self._take("is_specular"))
+
+    def subset(self, index) -> "SurfaceParams":
+        """The parameters of the hits ``index`` (an index array or mask)."""
+        return SurfaceParams(self.table, self.material[index])
+
+    def bsdf(self) -> "SurfaceBSDF":
+        return SurfaceBSDF(self)
+
+
+# -- Lobes ----------------------------------------------------------------------------------------
+class Lambertian:
+    """f = rho / pi on the normal's side; cosine-weighted sampling (pdf cos / pi, Eq. 9.5)."""
+
+    def __init__(self, reflectance: np.ndarray):
+        self.reflectance = reflectance            # (N, 3)
+
+    def subset(self, index) -> "Lambertian":
+        return Lambertian(self.reflectance[index])
+
+    def evaluate(self, wo, wi, n):
+        same = np.einsum("ij,ij->i", wi, n) > 0
+        return self.reflectance / np.pi * same[:, None]
+
+    def sample(self, wo, n, u):
+        wi = sampling.cosine_directions(n, u)
+        cos = np.einsum("ij,ij->i", wi, n)
+        return wi, self.reflectance, np.maximum(cos, 0.0) / np.pi
+
+    def pdf(self, wo, wi, n):
+        return np.maximum(np.einsum("ij,ij->i", wi, n), 0.0) / np.pi
+
+    def albedo(self):
+        return self.reflectance
+
+
+class PerfectMirror:
+    """A delta lobe: all of rho leaves in the mirror direction. ``evaluate`` and ``pdf`` are 0
+    for any pair of directions (a delta has no density); ``sample`` returns the mirror
+    direction with weight rho and pdf inf."""
+
+    def __init__(self, reflectance: np.ndarray):
+        self.reflectance = reflectance
+
+    def subset(self, index) -> "PerfectMirror":
+        return PerfectMirror(self.reflectance[index])
+
+    def evaluate(self, wo, wi, n):
+        return np.zeros((len(wi), 3))
+
+    def sample(self, wo, n, u=None):
+        return reflect(-wo, n), self.reflectance, np.full(len(wo), np.inf)
+
+    def pdf(self, wo, wi, n):
+        return np.zeros(len(wi))
+
+    def albedo(self):
+        return self.reflectance
+
+
+class SurfaceBSDF:
+    """The seed's material at hits: ``diffuse`` (Lambertian) + ``mirror`` (PerfectMirror).
+    ``sample`` picks a lobe with the roulette's probabilities (normalised: a pick, not an
+    absorption) and divides by that probability."""
+
+    def __init__(self, params: SurfaceParams):
+        self.params = params
+        self.diffuse = Lambertian(params.diffuse)
+        self.mirror = PerfectMirror(params.specular)
+
+    def lobe_probabilities(self):
+        """Russian roulette's (P_d, P_s) at each hit (``roulette_probabilities``)."""
+        return roulette_probabilities(self.params.diffuse, self.params.specular)
+
+    def absorption(self) -> np.ndarray:
+        """The share of light a hit absorbs per channel, 1 - rho_d - rho_s, in [0, 1]."""
+        return np.clip(1.0 - self.params.diffuse - self.params.specular, 0.0, 1.0)
+
+    def evaluate(self, wo, wi, n):
+        return self.diffuse.evaluate(wo, wi, n)
+
+    def pdf(self, wo, wi, n):
+        p_d, p_s = self.lobe_probabilities()
+        total = np.where(p_d + p_s > 0, p_d + p_s, 1.0)
+        return p_d / total * self.diffuse.pdf(wo, wi, n)
+
+    def sample(self, wo, n, u_lobe, u):
+        """(wi, weight, pdf, mirrored): lobe picked by ``u_lobe`` (N,) in proportion to the
+        roulette's probabilities; hits that reflect nothing get weight 0."""
+        p_d, p_s = self.lobe_probabilities()
+        total = p_d + p_s
+        share_d = np.divide(p_d, total, out=np.zeros_like(p_d), where=total > 0)
+        mirrored = (u_lobe >= share_d) & (p_s > 0)
+        wi, weight, pdf = self.diffuse.sample(wo, n, u)
+        weight = np.divide(weight, share_d[:, None], out=np.zeros_like(weight),
+                           where=share_d[:, None] > 0)
+        pdf = pdf * share_d
+        if mirrored.any():
+            m = np.flatnonzero(mirrored)
+            share_s = 1.0 - share_d[m]
+            wi[m] = reflect(-wo[m], n[m])
+            weight[m] = np.divide(self.params.specular[m], share_s[:, None],
+                                  out=np.zeros((len(m), 3)), where=share_s[:, None] > 0)
+            pdf[m] = np.inf
+        return wi, weight, pdf, mirrored
+
+    def albedo(self):
+        return self.params.diffuse + self.params.specular

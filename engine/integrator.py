@@ -1,0 +1,290 @@
+"""The camera stage: radiance per pixel, in blocks of the frame on a thread pool.
+
+What it computes
+    ``render_camera(context, progress, cancelled)`` -> ``CameraImage``: the Combined image
+    (linear radiance [W m^-2 sr^-1], flat (pixels, 3) float32 of the render window, top row
+    first), the Emission, Direct and Indirect parts the passes ask for, the Cache usage shares
+    and the batches' summed counters.
+    ``shade_block(context, index, pixels, camera)``  one batch: ``samples`` rays a pixel
+        through the Blackman-Harris filter (``engine/camera.py``); at each hit
+        * emission (surfaces and the world seen from the camera or in mirrors);
+        * at a diffuse hit, ``full`` mode: exact direct light (``engine/direct.py``) times
+          rho_d / pi, plus the indirect estimator of ``context.indirect``
+          (``engine/indirect.py``: cache, gather or photon map) at the samples that ask;
+          ``photon-map`` mode: the photon map's estimate of all light;
+        * at a mirror: the reflected ray goes on with throughput rho_s, up to
+          ``max_specular_depth`` bounces.
+        Materials are read through ``bsdf`` (``SceneSurfaces.params``).
+
+Blocks (``settings.camera_blocks``) are square parts of the full frame (64 x 64 pixels at
+16 spp), each with its own random stream from (seed, block number): they run on the thread
+pool (embreex and numpy release the GIL) and a fixed seed gives the same picture whatever the
+scheduling or the thread count. Between batches ``progress(fraction, text)`` is called and
+``cancelled()`` polled; a batch takes well under a second, so Esc acts quickly. Each batch
+keeps its own counters, summed once it is done (no counter is shared between threads).
+"""
+from __future__ import annotations
+
+import time
+from concurrent.futures import FIRST_COMPLETED, wait
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import sampling
+from .camera import pixel_rays
+from .direct import direct_terms, irradiance_from_terms
+from .settings import RenderSettings, camera_blocks
+
+# What each camera batch counts (rays, seconds of threads, look-ups); summed over batches.
+BATCH_COUNTERS = ("camera_rays", "shadow_rays", "specular_rays", "trace_seconds", "queries",
+                  "query_seconds", "estimate_seconds", "cache_interpolated", "cache_gathered",
+                  "cache_local_records", "cache_local_interpolated", "gather_rays",
+                  "gather_points", "shadow_rays_saved", "shadow_lit", "shadow_umbra",
+                  "shadow_penumbra")
+# Above this many materials the per-(pixel, material) histogram of the diffuse term gets big.
+MAX_HISTOGRAM_MATERIALS = 64
+PART_NAMES = ("Emission", "Direct", "Indirect")
+
+
+@dataclass
+class CameraContext:
+    """What every batch of one render shares (read only)."""
+
+    scene: object
+    surfaces: object               # surfaces.SceneSurfaces
+    accel: object
+    lights: object                 # lights.LightSet
+    settings: RenderSettings
+    indirect: object = None        # an estimator of engine/indirect.py, or None
+    shadow_map: object = None      # shadow_photons.ShadowPhotonMap, or None
+    track_usage: bool = False      # the Cache usage pass asks for per-pixel shares
+    ray_log: list | None = None    # benchmarks: every traced batch of rays
+
+
+@dataclass
+class CameraImage:
+    image: np.ndarray                           # (pixels, 3) float32, the window
+    parts: dict = field(default_factory=dict)   # "Emission" / "Direct" / "Indirect" asked for
+    usage: np.ndarray | None = None             # (pixels, 2): interpolated, gathered shares
+    totals: dict = field(default_factory=dict)  # BATCH_COUNTERS summed, batch_seconds
+    batches: int = 0
+    done: int = 0
+    cancelled: bool = False
+    seconds: float = 0.0
+
+
+def add_to_pixels(pixels: np.ndarray, pixel_of: np.ndarray | None, values: np.ndarray):
+    """pixels[pixel_of[i]] += values[i] (values (n, 3)); pixel_of None: all samples in order."""
+    if pixel_of is None:
+        pixels += values.reshape(len(pixels), -1, 3).sum(axis=1)
+        return
+    for c in range(3):
+        pixels[:, c] += np.bincount(pixel_of, weights=values[:, c], minlength=len(pixels))
+
+
+def render_camera(context: CameraContext, wanted_parts, pool, progress=None, cancelled=None,
+                  skip: bool = False) -> CameraImage:
+    """Every block of the render window on ``pool``, at most two per worker in flight;
+    ``wanted_parts``: which of ``PART_NAMES`` to keep; ``skip``: render nothing (an earlier
+    stage was cancelled)."""
+    scene, settings = context.scene, context.settings
+    width, height = scene.camera.window_size
+    pixel_count = width * height
+    blocks = camera_blocks(scene.camera, settings.samples)
+    out = CameraImage(image=np.zeros((pixel_count, 3), np.float32), batches=len(blocks),
+                      parts={name: np.zeros((pixel_count, 3), np.float32)
+                             for name in PART_NAMES if name in wanted_parts},
+                      usage=np.zeros((pixel_count, 2)) if context.track_usage else None,
+                      totals={**dict.fromkeys(BATCH_COUNTERS, 0), "batch_seconds": 0.0})
+    label = "Rendering" if settings.mode == "full" else "Photon map"
+
+    def tell(text):
+        if progress is not None:
+            progress(out.done / max(len(blocks), 1), text)
+
+    t0 = time.perf_counter()
+    tell(f"{label}: 0/{len(blocks)} batches")
+    pending = {}
+    queue = [] if skip else list(reversed(blocks))
+
+    def submit():
+        while queue and len(pending) < 2 * settings.worker_count:
+            block = queue.pop()
+            future = pool.submit(shade_block, context, block.index, block.pixels, block.camera)
+            pending[future] = block
+
+    submit()
+    while pending:
+        finished, _ = wait(list(pending), return_when=FIRST_COMPLETED)
+        for future in finished:
+            block = pending.pop(future)
+            parts, batch_stats, batch_usage = future.result()
+            src, dst = block.source, block.target
+            out.image[dst] = (parts[0] + parts[1] + parts[2])[src]
+            for index, name in enumerate(PART_NAMES):
+                if name in out.parts:
+                    out.parts[name][dst] = parts[index][src]
+            if out.usage is not None:
+                out.usage[dst] = batch_usage[src]
+            for key in BATCH_COUNTERS:
+                out.totals[key] += batch_stats[key]
+            out.totals["batch_seconds"] += batch_stats["seconds"]
+            out.done += 1
+        tell(f"{label}: {out.done}/{len(blocks)} batches")
+        if cancelled is not None and cancelled():
+            out.cancelled = True
+            queue.clear()
+        submit()
+    out.seconds = time.perf_counter() - t0
+    return out
+
+
+def shade_block(context: CameraContext, batch: int, pixels: int, camera):
+    """Radiance for the ``pixels`` of one block (``camera``: the frame's camera bordered to
+    it), mean over their samples, by kind: (3, pixels, 3) for emission, direct light and
+    indirect light (in ``photon-map`` mode: the whole estimate); their sum is Combined. Also
+    the batch's counters and, with ``track_usage``, (pixels, 2) shares of samples
+    interpolated from cache records and gathered afresh."""
+    scene, surfaces, accel = context.scene, context.surfaces, context.accel
+    settings, ray_log, photon = context.settings, context.ray_log, context.indirect
+    materials = surfaces.materials
+    stats = dict.fromkeys(BATCH_COUNTERS, 0)
+    stats["seconds"] = 0.0
+    direct_light = settings.mode == "full"
+    started = time.perf_counter()
+    rng = sampling.rng_for(settings.seed, sampling.STREAM_CAMERA, batch)
+    spp = settings.samples
+    origins, directions, tmax = pixel_rays(camera, 0, pixels, spp, rng, settings.filter_width)
+    count = len(origins)
+    # Sums of the samples' radiance per pixel, by kind (the Emission, Direct and Indirect
+    # passes; Combined is their sum): every contribution goes straight to its pixel.
+    parts = np.zeros((3, pixels, 3))
+    emission_sums, direct_sums, indirect_sums = parts
+    # Cache usage pass: per pixel, samples interpolated from records and samples gathered.
+    usage = np.zeros((pixels, 2)) if context.track_usage else None
+    throughput = np.ones((count, 3), np.float32) if materials.has_specular else None
+    ray_of = np.arange(count)
+    world = scene.world.radiance
+    if photon is not None and photon.lookups < spp:
+        first_lookup = rng.integers(0, spp, pixels)
+    for depth in range(settings.max_specular_depth + 1):
+        if len(ray_of) == 0:
+            break
+        if ray_log is not None:
+            ray_log.append(("camera" if depth == 0 else "specular", origins, directions, tmax))
+        t0 = time.perf_counter()
+        _t, prim, bu, bv = accel.intersect(origins, directions, tmax)
+        stats["trace_seconds"] += time.perf_counter() - t0
+        stats["camera_rays" if depth == 0 else "specular_rays"] += len(origins)
+        hit = prim >= 0
+        all_hit = bool(hit.all())
+        if not all_hit and not scene.world.is_black:
+            missed = np.broadcast_to(world, (int((~hit).sum()), 3)) if throughput is None \
+                else throughput[~hit] * world
+            add_to_pixels(emission_sums, ray_of[~hit] // spp, missed)
+        if not hit.any():
+            break
+        if not all_hit:
+            prim, bu, bv, t_hit = prim[hit], bu[hit], bv[hit], _t[hit]
+            d, o, rays = directions[hit], origins[hit], ray_of[hit]
+            thr = None if throughput is None else throughput[hit]
+        else:
+            t_hit, d, o, rays, thr = _t, directions, origins, ray_of, throughput
+        # Samples in order (primary rays, all hit): pixel sums need no index.
+        in_order = depth == 0 and all_hit
+        pixel_of = None if in_order else rays // spp
+        x = sampling.scale_rows(d, t_hit)
+        x += o
+        ng, ns, front = surfaces.normals(prim, bu, bv, d)
+        surface = surfaces.params(prim)
+
+        if materials.has_emission:
+            emitted = surface.emitted_radiance * (front | surface.both_sides)[:, None]
+            add_to_pixels(emission_sums, pixel_of, emitted if thr is None else thr * emitted)
+
+        diffuse = surface.is_diffuse
+        if diffuse.all():
+            idx = slice(None)
+        elif diffuse.any():
+            idx = np.nonzero(diffuse)[0]
+        else:
+            idx = None
+        if idx is not None and photon is not None:
+            # The indirect estimate at the diffuse hits of the samples that ask for it.
+            ask = idx if isinstance(idx, np.ndarray) else np.arange(len(prim))
+            if photon.lookups < spp:
+                # The pixel's strata come in a fixed order: start at a random one per pixel,
+                # so the asking samples are a uniform pick over the pixel's filter footprint.
+                s = rays[ask]
+                ask = ask[(s - first_lookup[s // spp]) % spp < photon.lookups]
+            if len(ask):
+                t0 = time.perf_counter()
+                e = photon.irradiance(x[ask], ns[ask], ng[ask], rng, stats)
+                stats["estimate_seconds"] += time.perf_counter() - t0
+                covered = stats.pop("covered_mask", None)
+                if usage is not None and covered is not None:
+                    owner = rays[ask] // spp
+                    usage[:, 0] += np.bincount(owner[covered], minlength=len(usage))
+                    usage[:, 1] += np.bincount(owner[~covered], minlength=len(usage))
+                e *= surface.diffuse_over_pi[ask] * (spp / min(photon.lookups, spp))
+                if depth > 0:
+                    e *= thr[ask]
+                add_to_pixels(indirect_sums, rays[ask] // spp, e)
+        if idx is not None and direct_light:
+            _shade_direct(context, stats, rng, depth, idx, x, ns, ng, surface, thr, rays,
+                          pixel_of, direct_sums)
+
+        if not materials.has_specular or depth == settings.max_specular_depth:
+            break
+        mirror = surface.is_specular
+        if not mirror.any():
+            break
+        idx = np.nonzero(mirror)[0]
+        directions, weight, _pdf = surface.subset(idx).bsdf().mirror.sample(-d[idx], ns[idx])
+        origins = accel.offset_origins(x[idx], ng[idx], directions)
+        tmax = None
+        throughput = thr[idx] * weight
+        ray_of = rays[idx]
+
+    parts /= spp
+    if usage is not None:
+        usage /= spp
+    stats["seconds"] = time.perf_counter() - started
+    return parts, stats, usage
+
+
+def _shade_direct(context, stats, rng, depth, idx, x, ns, ng, surface, thr, rays, pixel_of,
+                  direct_sums):
+    """Direct light at the diffuse hits ``idx``: rho_d / pi times the irradiance of
+    ``direct.direct_terms``, summed into the pixels. Primary hits of a scene whose materials
+    are constant per material (no textures) sum each term's scalar weights in a (pixel,
+    material) histogram and multiply by the materials' rho_d / pi once, instead of per hit."""
+    settings, materials, spp = context.settings, context.surfaces.materials, context.settings.samples
+    shadow_stats = {}
+    terms = direct_terms(x[idx], ns[idx], context.lights, context.accel, rng,
+                         settings.light_samples, stats=shadow_stats, offset_normals=ng[idx],
+                         ray_log=context.ray_log, shadow_map=context.shadow_map)
+    stats["shadow_rays"] += shadow_stats.get("shadow_rays", 0)
+    for key in ("shadow_rays_saved", "shadow_lit", "shadow_umbra", "shadow_penumbra"):
+        stats[key] = stats.get(key, 0) + shadow_stats.get(key, 0)
+    stats["trace_seconds"] += shadow_stats.get("trace_seconds", 0.0)
+    count = materials.count
+    if depth == 0 and materials.constant_per_material and count <= MAX_HISTOGRAM_MATERIALS:
+        mat_d = surface.material[idx]
+        if pixel_of is None:
+            key = np.repeat(np.arange(len(direct_sums), dtype=np.int32) * count, spp)[idx]
+        else:
+            key = pixel_of[idx] * count
+        key += mat_d
+        for target, scalar, rgb in terms:
+            hist = np.bincount(key if target is None else key[target], weights=scalar,
+                               minlength=len(direct_sums) * count)
+            direct_sums += hist.reshape(-1, count) @ (materials.diffuse_over_pi * rgb)
+    elif terms:
+        e = irradiance_from_terms(terms, len(x[idx]))
+        e *= surface.diffuse_over_pi[idx]
+        if depth > 0:
+            e *= thr[idx]
+        in_order = pixel_of is None and isinstance(idx, slice)
+        add_to_pixels(direct_sums, None if in_order else (rays // spp)[idx], e)
