@@ -105,7 +105,9 @@ def _light_fluxes(scene: Scene):
             cos_half = np.cos(light.half_angle)
             mu = np.linspace(cos_half, 1.0, 2049)
             mask = spot_mask(mu, cos_half, light.blend)
-            solid = 2 * np.pi * np.trapz(mask, mu)
+            # The trapezoid rule written out: numpy 2 (Blender 5.1+) has no np.trapz, and
+            # np.trapezoid is not in numpy 1.26 (Blender 4.2-5.0); the same sums as trapz.
+            solid = 2 * np.pi * (np.diff(mu) * (mask[1:] + mask[:-1]) / 2.0).sum()
             out.append((light.name, light.flux / (4 * np.pi) * solid, ("spot", light)))
         elif isinstance(light, SunLight):
             out.append((light.name, light.irradiance * np.pi * radius ** 2,
