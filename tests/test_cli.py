@@ -340,9 +340,15 @@ def test_help_is_fast_and_does_not_import_bpy():
     assert "render" in done.stdout and "scene" in done.stdout
 
 
-def test_bench_is_dispatched(capfd):
+def test_bench_is_dispatched(capfd, monkeypatch):
+    """From a checkout ``lanterna bench`` reaches bench/main.py; where bench/ is absent (an
+    installed add-on: the zips leave it out) it says so in one line, exit status 2."""
     assert cli.main(["bench", "--help"]) == 0
     assert "lanterna bench" in capfd.readouterr().out
+    monkeypatch.setattr(cli, "BENCH_PACKAGE", "lanterna.no_bench_here")
+    assert cli.main(["bench"]) == 2
+    err = capfd.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("lanterna: error: the benchmarks are not part")
 
 
 def test_passes_are_written_as_exr_layers(tmp_path, capfd):
