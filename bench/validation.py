@@ -102,7 +102,7 @@ def direct_parity() -> list[dict]:
     rows = []
     for name in parity_scenes.SCENES:
         t0 = time.perf_counter()
-        images = D.render_lanterna(name)
+        images, _sampling = D.render_lanterna(name)
         row = _blocks_against(name, images, D.load_reference(name))
         row["seconds"] = (time.perf_counter() - t0) / len(images)
         rows.append(row)

@@ -61,26 +61,38 @@ def test_gradients_lower_the_interpolation_error(per_pixel_gather):
     assert with_gradients <= 0.75 * without, (with_gradients, without)
 
 
+SHADOW_BLOCKS = (slice(2, 3), slice(1, 3))     # the floor under the plate, in the 4 x 4 blocks
+
+
 def test_cache_keeps_an_indirect_shadow_with_the_neighbour_check():
     """An indirect shadow: a spot under the ceiling lights only the ceiling; the floor gets
     that bounced light, less under a plate floating 1 m above it. Ward's weight sees no reason
     for records there (distances and normals are those of an open floor), so without the
     neighbour check (``cache_refine``) the records interpolate across the shadow's edge.
-    a = 0.3, against the per-pixel gather with the same photons, worst 4 x 4 block: measured
-    1.8-3.3 % with the check (mean 2.45 %, SD 0.58 %) and 21-28 % without it over seeds 3-8.
-    Bounds: 5 % with (mean + 4 SD), at least 15 % without (so the test sees the difference
-    the check makes)."""
+
+    Measured at a = 0.3 against the per-pixel gather with the same photons, seeds 3-12, on the
+    two blocks of the floor under the plate (green, the mean of the two):
+    with the check -0.24, 1.88, -0.30, 0.08, -0.46, 1.93, -0.61, -1.57, 2.26, 1.72 %
+    (mean 0.47 %, SD 1.35 %); without it 19.8-23.9 % (mean 22.0 %, SD 1.4 %).
+    Bounds: |with| <= 6 % (the mean + 4 SD) and without >= 16 % (the mean - 4 SD).
+
+    (This test used to bound the worst of all 48 block-channels: 3 %, then 5 % after the
+    photon bounce change. That statistic is the cache's noise, not the shadow: with the check
+    every block's mean over the seeds lies within 1.2 % of the gather, its SD is 0.5-2.3 %, and
+    the worst of 48 came out 2.0-4.7 % (mean 3.1 %, SD 0.9 %), so 3 % failed on a new photon
+    map and 5 % was under 4 SD. The bias the check removes sits in the shadow's blocks.)"""
     scene = _plate_under_a_spot()
     gathered = _blocks(render(scene, RenderSettings(indirect="gather", **BASE)).image)
 
-    def worst(refine):
+    def shadow_error(refine):
         result = render(scene, RenderSettings(indirect="cache", cache_error=0.3,
                                               cache_refine=refine, **BASE))
-        return np.abs(_blocks(result.image) / gathered - 1).max(), result.report
+        error = _blocks(result.image) / gathered - 1
+        return float(error[SHADOW_BLOCKS][..., 1].mean()), result.report
 
-    with_check, report = worst(True)
-    without, _ = worst(False)
-    assert with_check <= 0.05 and without >= 0.15, (with_check, without)
+    with_check, report = shadow_error(True)
+    without, _ = shadow_error(False)
+    assert abs(with_check) <= 0.06 and without >= 0.16, (with_check, without)
     passes = report["stages"]["irradiance_cache"]["passes"]
     assert sum(p["shrunk"] for p in passes) > 0
 
