@@ -65,7 +65,9 @@ from pathlib import Path
 
 import numpy as np
 
+from .archive import ArchiveError, check_budget, check_schema, entry_headers
 from .irradiance_cache import IrradianceCache
+from .memory import available_memory
 from .npzjson import jsonable, pack_json, unpack_json
 from .photons import PhotonMap
 from .scene import SceneError
@@ -86,6 +88,16 @@ MAP_SETTINGS = ("mode", "bounces", "seed", "photons", "photon_k", "photon_radius
 _FINGERPRINT_TAG = "lanterna-fingerprint-v1"
 _MAPS = (("photons", "photon_map", PhotonMap), ("shadow_photons", "shadow_map", ShadowPhotonMap),
          ("cache", "cache", IrradianceCache))
+#: The file's own entries (``engine/archive.py`` schema).
+HEADER_SCHEMA = {"lanterna.format": (("<i8",), ()), "lanterna.version": (("U",), ()),
+                 "lanterna.fingerprint": (("U",), ()), "lanterna.scene_parts": (("U",), ()),
+                 "lanterna.settings": (("U",), ()), "lanterna.report": (("U",), ()),
+                 "lanterna.scene_name": (("U",), ()), "lanterna.maps": (("U",), ())}
+#: The count each map's report entry promises, and the symbol of its schema that counts it.
+PROMISED = {"photons": ("photons", "stored", "P"), "cache": ("irradiance_cache", "records", "N"),
+            "shadow_photons": ("shadow_photons", "stored", "P")}
+MEMORY_SHARE = 0.5                 # of the available memory a maps file may take once read
+UNKNOWN_MEMORY_BUDGET = 16 << 30   # when the platform cannot tell [bytes]
 SCENE_PART_NAMES = {"geometry": "the geometry (triangles or shading normals)",
                     "materials": "the materials", "lights": "the lights or the world",
                     "camera": "the camera (view, lens, resolution or border)"}
@@ -308,6 +320,24 @@ def load_artifacts(path, scene, settings) -> Artifacts:
     if not path.is_file():
         raise ArtifactError(f"{where} does not exist")
     try:
+        headers = entry_headers(path)
+    except ArchiveError as exc:
+        if exc.whole:
+            raise ArtifactError(f"{where} is not a Lanterna maps file ({exc})") from None
+        raise ArtifactError(f"{where} is damaged: {exc}") from None
+    if "lanterna.format" not in headers:
+        raise ArtifactError(f"{where} is not a Lanterna maps file (an .npz archive without "
+                            "the 'lanterna.format' entry)")
+    problems = check_schema(headers, HEADER_SCHEMA)
+    if problems:
+        raise ArtifactError(f"{where} is damaged: {problems[0]}")
+    available = available_memory()
+    try:
+        check_budget(headers, UNKNOWN_MEMORY_BUDGET if available is None
+                     else int(available * MEMORY_SHARE))
+    except ArchiveError as exc:
+        raise ArtifactError(f"{where} is refused: {exc}") from None
+    try:
         data = np.load(path, allow_pickle=False)
     except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
         raise ArtifactError(f"{where} is not a Lanterna maps file (not a numpy .npz archive: "
@@ -316,10 +346,27 @@ def load_artifacts(path, scene, settings) -> Artifacts:
         raise ArtifactError(f"{where} is not a Lanterna maps file (a single numpy array, not "
                             "an .npz archive)")
     with data:
-        return _load_open(data, where, scene, settings)
+        return _load_open(data, headers, where, scene, settings)
 
 
-def _load_open(data, where, scene, settings) -> Artifacts:
+def _check_map(prefix, cls, headers, report, where):
+    """The map ``prefix``'s entries against ``cls.SCHEMA`` and the count its report entry
+    promises, from the headers alone (nothing decompressed yet)."""
+    problems = check_schema(headers, cls.SCHEMA, prefix + ".")
+    if not problems and prefix in PROMISED:
+        stage, key, symbol = PROMISED[prefix]
+        promised = (report.get(stage) or {}).get(key) if isinstance(report, dict) else None
+        rows = next(headers[prefix + "." + name].shape[0]
+                    for name, (_d, shape) in cls.SCHEMA.items()
+                    if shape and shape[0] == symbol)
+        if isinstance(promised, int) and promised != rows:
+            problems.append(f"the entry '{prefix}.positions' has {rows:,} rows, but the file's "
+                            f"report says {promised:,}")
+    if problems:
+        raise ArtifactError(f"{where} is damaged: {problems[0]}")
+
+
+def _load_open(data, headers, where, scene, settings) -> Artifacts:
     def entry(key):
         try:
             return data[key]
@@ -380,13 +427,19 @@ def _load_open(data, where, scene, settings) -> Artifacts:
                             f"{'; '.join(changed) or 'unknown'}). Bake the maps again or "
                             "restore those settings")
 
+    if not (isinstance(present, list) and all(isinstance(p, str) for p in present)):
+        raise ArtifactError(f"{where} is damaged: its list of maps cannot be read")
     maps = {}
     for prefix, attr, cls in _MAPS:
         if prefix not in present:
             maps[attr] = None
             continue
+        _check_map(prefix, cls, headers, report, where)
         head = prefix + "."
         sub = {key[len(head):]: entry(key) for key in data.files if key.startswith(head)}
+        problems = cls.value_problems(sub)
+        if problems:
+            raise ArtifactError(f"{where} is damaged: {problems[0]} (entries '{head}*')")
         try:
             maps[attr] = cls.from_arrays(sub)
         except (KeyError, ValueError, TypeError, IndexError) as exc:

@@ -260,7 +260,8 @@ def _shade_direct(context, stats, rng, depth, idx, x, ns, ng, surface, thr, rays
     ``direct.direct_terms``, summed into the pixels. Primary hits of a scene whose materials
     are constant per material (no textures) sum each term's scalar weights in a (pixel,
     material) histogram and multiply by the materials' rho_d / pi once, instead of per hit."""
-    settings, materials, spp = context.settings, context.surfaces.materials, context.settings.samples
+    settings, materials = context.settings, context.surfaces.materials
+    spp = settings.samples
     shadow_stats = {}
     terms = direct_terms(x[idx], ns[idx], context.lights, context.accel, rng,
                          settings.light_samples, stats=shadow_stats, offset_normals=ng[idx],

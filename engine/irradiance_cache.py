@@ -469,6 +469,15 @@ class IrradianceCache:
                  e_min: float = 1e-6, cell_fraction: float = 1.0):
         if index not in ("grid", "kdtree"):
             raise ValueError(f"unknown index {index!r}: 'grid' or 'kdtree'")
+        # Limits that keep the index finite: a cell of 1e-300 R made the grid's loop over the
+        # cells a record reaches run for ever; a radius ratio at 1 puts every record in a class
+        # of its own.
+        for name, value, low, high in (("channels", channels, 1, 64),
+                                       ("radius_ratio", radius_ratio, 1.0 + 1e-9, 1e3),
+                                       ("e_min", e_min, 1e-300, 1.0),
+                                       ("cell_fraction", cell_fraction, 0.05, 20.0)):
+            if not (np.isfinite(value) and low <= value <= high):
+                raise ValueError(f"{name} = {value!r} is outside [{low:g}, {high:g}]")
         self.channels = int(channels)
         self.index = index
         self.radius_ratio = float(radius_ratio)
@@ -540,6 +549,45 @@ class IrradianceCache:
     # persistence (engine/artifacts.py) -------------------------------------------------
     ARRAY_FIELDS = ("positions", "normals", "irradiance", "radius", "rot_grad", "trans_grad",
                     "usage")
+    #: What saved records must hold (``engine/archive.py``): N records of C channels.
+    SCHEMA = {"positions": (("<f8",), ("N", 3)), "normals": (("<f8",), ("N", 3)),
+              "irradiance": (("<f8",), ("N", "C")), "radius": (("<f8",), ("N",)),
+              "rot_grad": (("<f8",), ("N", "C", 3)), "trans_grad": (("<f8",), ("N", "C", 3)),
+              "usage": (("<i8",), ("N",)), "channels": (("<i8",), ()), "index": (("U",), ()),
+              "radius_ratio": (("<f8",), ()), "e_min": (("<f8",), ()),
+              "cell_fraction": (("<f8",), ())}
+
+    @staticmethod
+    def value_problems(arrays) -> list[str]:
+        """What is wrong with saved records' values (the shapes passed ``SCHEMA``): finite
+        positions, unit normals, irradiance finite in [0, 1e30] W/m^2, radii finite and
+        positive, finite gradients, the options within ``__init__``'s ranges."""
+        out = []
+        for key in ("positions", "rot_grad", "trans_grad"):
+            if not np.isfinite(arrays[key]).all():
+                out.append(f"record {key.replace('_', ' ')} are not finite")
+        normals = arrays["normals"]
+        length = np.sqrt(np.einsum("ij,ij->i", normals, normals))
+        if not (np.isfinite(length).all() and np.all(np.abs(length - 1) <= 1e-6)):
+            out.append("record normals are not unit vectors")
+        e = arrays["irradiance"]
+        if not (np.isfinite(e).all() and (e >= 0).all() and (e <= 1e30).all()):
+            out.append("record irradiance is not finite in [0, 1e30] W/m^2")
+        radius = arrays["radius"]
+        if not (np.isfinite(radius).all() and (radius > 0).all()):
+            out.append("record radii are not finite and positive")
+        if (arrays["usage"] < 0).any():
+            out.append("record usage counts are negative")
+        if arrays["channels"].item() != arrays["irradiance"].shape[1]:
+            out.append("the channel count disagrees with the irradiance's columns")
+        try:
+            IrradianceCache(channels=int(arrays["channels"]), index=str(arrays["index"]),
+                            radius_ratio=float(arrays["radius_ratio"]),
+                            e_min=float(arrays["e_min"]),
+                            cell_fraction=float(arrays["cell_fraction"]))
+        except ValueError as exc:
+            out.append(str(exc))
+        return out
 
     def to_arrays(self) -> dict:
         """The records as named numpy arrays (float64, usage int64) and the options as 0-d

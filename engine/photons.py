@@ -40,7 +40,7 @@ from . import sampling
 from .accel import offset_distance
 from .lights import LUMINANCE, spot_mask
 from .npzjson import pack_json, unpack_json
-from .scene import AreaLight, PointLight, Scene, SpotLight, SunLight
+from .scene import MAX_COORDINATE, MAX_VALUE, AreaLight, PointLight, Scene, SpotLight, SunLight
 from .bsdf import MaterialTable
 from .surfaces import SceneSurfaces
 
@@ -290,6 +290,36 @@ class PhotonMap:
 
     # Persistence (engine/artifacts.py) ----------------------------------------------------
     ARRAY_FIELDS = ("positions", "power", "incoming", "normals", "bounces")
+    #: What a saved map must hold (``engine/archive.py``): P photons.
+    SCHEMA = {"positions": (("<f4",), ("P", 3)), "power": (("<f4",), ("P", 3)),
+              "incoming": (("<f2",), ("P", 3)), "normals": (("<f2",), ("P", 3)),
+              "bounces": (("|u1",), ("P",)), "stats": (("U",), ()),
+              "library": (("U",), ()), "built": (("|b1",), ())}
+
+    @staticmethod
+    def value_problems(arrays) -> list[str]:
+        """What is wrong with a saved map's values (the shapes passed ``SCHEMA``): positions
+        finite within ``MAX_COORDINATE``, power finite in [0, ``MAX_VALUE``] W, directions
+        unit vectors (to float16's precision), a known kd-tree library."""
+        out = []
+        positions = arrays["positions"]
+        if not (np.isfinite(positions).all() and np.abs(positions).max(initial=0) <= MAX_COORDINATE):
+            out.append("photon positions are not finite or lie beyond "
+                       f"{MAX_COORDINATE:g} m")
+        power = arrays["power"]
+        if not np.isfinite(power).all():
+            out.append("photon power is not finite (NaN or inf)")
+        elif power.size and not (power.min() >= 0 and power.max() <= MAX_VALUE):
+            out.append(f"photon power lies outside [0, {MAX_VALUE:g}] W "
+                       f"({power.min():g} to {power.max():g})")
+        for key in ("incoming", "normals"):
+            v = arrays[key].astype(np.float32)
+            length = np.sqrt(np.einsum("ij,ij->i", v, v))
+            if not (np.isfinite(length).all() and np.all(np.abs(length - 1) <= 0.01)):
+                out.append(f"photon {key} are not unit vectors")
+        if str(arrays["library"]) not in ("pykdtree", "scipy"):
+            out.append(f"unknown kd-tree library {str(arrays['library'])!r}")
+        return out
 
     def to_arrays(self) -> dict:
         """The map as named numpy arrays (no Python objects: ``np.load(allow_pickle=False)``

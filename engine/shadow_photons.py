@@ -298,6 +298,51 @@ class ShadowPhotonMap:
     ARRAY_FIELDS = ("positions", "directions", "light", "crossings", "rep_index", "rep_class",
                     "rep_radius")
     SCALAR_FIELDS = ("k", "margin", "disc", "penumbra_factor", "lookup_k")
+    #: What a saved map must hold (``engine/archive.py``): P photons, R representatives, L
+    #: lights with photons, K lights with a radius.
+    SCHEMA = {"positions": (("<f4",), ("P", 3)), "directions": (("|i1",), ("P", 2)),
+              "light": (("|u1", "<u2"), ("P",)), "crossings": (("|u1",), ("P",)),
+              "rep_index": (("<i4", "<i8"), ("R",)), "rep_class": (("|i1",), ("R",)),
+              "rep_radius": (("<f4",), ("R",)), "slices.keys": (("<i8",), ("L",)),
+              "slices.values": (("<i8",), ("L", 2)), "rep_slices.keys": (("<i8",), ("L",)),
+              "rep_slices.values": (("<i8",), ("L", 2)), "radius.keys": (("<i8",), ("K",)),
+              "radius.values": (("<f8",), ("K",)), "k": (("<i8",), ()),
+              "margin": (("<f8",), ()), "disc": (("<f8",), ()),
+              "penumbra_factor": (("<i8",), ()), "lookup_k": (("<i8",), ()),
+              "stats": (("U",), ())}
+
+    @staticmethod
+    def value_problems(arrays) -> list[str]:
+        """What is wrong with a saved map's values (the shapes passed ``SCHEMA``): finite
+        positions, representatives that index photons, classes lit / umbra / penumbra, slices
+        inside the arrays, radii and options within their ranges."""
+        out = []
+        positions, count = arrays["positions"], len(arrays["positions"])
+        if not np.isfinite(positions).all():
+            out.append("shadow photon positions are not finite")
+        rep = arrays["rep_index"]
+        if rep.size and not (rep.min() >= 0 and rep.max() < count):
+            out.append("representatives index photons that do not exist")
+        if not np.isin(arrays["rep_class"], (LIT, UMBRA, PENUMBRA)).all():
+            out.append("representative classes are not lit, umbra or penumbra")
+        radius = arrays["rep_radius"]
+        if not (np.isfinite(radius).all() and (radius >= 0).all()):
+            out.append("representative radii are not finite and >= 0")
+        for name, size in (("slices", count), ("rep_slices", len(rep))):
+            v = arrays[name + ".values"]
+            if v.size and not ((v[:, 0] >= 0).all() and (v[:, 0] <= v[:, 1]).all()
+                               and (v[:, 1] <= size).all()):
+                out.append(f"{name} reach outside the arrays")
+        lights = arrays["radius.values"]
+        if not (np.isfinite(lights).all() and (lights > 0).all()):
+            out.append("light radii are not finite and positive")
+        for name, low, high in (("k", 1, 10_000), ("penumbra_factor", 1, 1024),
+                                ("lookup_k", 1, 10_000), ("margin", 0.0, 1e6),
+                                ("disc", 1e-6, 1e6)):
+            value = arrays[name].item()
+            if not (np.isfinite(value) and low <= value <= high):
+                out.append(f"{name} = {value!r} is outside [{low:g}, {high:g}]")
+        return out
 
     def to_arrays(self) -> dict:
         """The map as named numpy arrays (``np.load(allow_pickle=False)`` reads them back):

@@ -329,3 +329,123 @@ def test_a_failed_save_leaves_the_old_file_whole(baked, saved, tmp_path, monkeyp
     assert sorted(p.name for p in tmp_path.iterdir()) == ["maps.npz"]
     with pytest.raises(A.ArtifactError, match="does not exist"):
         A.save_artifacts(tmp_path / "no" / "such" / "dir.npz", baked)
+
+
+# -- What the arrays hold: checked on load, before any use (issue 22) ---------------------------
+def _entry(path, key):
+    with np.load(path, allow_pickle=False) as data:
+        return data[key].copy()
+
+
+def _changed(saved, key, change):
+    value = _entry(saved, key)
+    return change(value)
+
+
+def _set(value, index, x):
+    value = value.copy()
+    value[index] = x
+    return value
+
+
+DAMAGES = {
+    # entry, how it is damaged, what the refusal must say
+    "photon power NaN": ("photons.power", lambda v: _set(v, (0, 0), np.nan),
+                         "photon power is not finite"),
+    "photon power inf": ("photons.power", lambda v: _set(v, (3, 1), np.inf),
+                         "photon power is not finite"),
+    "photon power 3e38": ("photons.power", lambda v: _set(v, (0, 2), 3e38),
+                          "photon power lies outside [0, 1e+30] W"),
+    "photon power -1e30": ("photons.power", lambda v: _set(v, (5, 0), -1e30),
+                           "photon power lies outside [0, 1e+30] W"),
+    "photon positions NaN": ("photons.positions", lambda v: _set(v, (1, 1), np.nan),
+                             "photon positions are not finite"),
+    "photon normals not unit": ("photons.normals", lambda v: v * np.float16(2),
+                                "photon normals are not unit vectors"),
+    "photon rows mismatched": ("photons.power", lambda v: v[:-1],
+                               "'photons.power' has"),
+    "photon positions as integers": ("photons.positions", lambda v: v.astype(np.int64),
+                                     "'photons.positions' is int64, not float32"),
+    "cache irradiance NaN": ("cache.irradiance", lambda v: _set(v, (0, 0), np.nan),
+                             "record irradiance is not finite"),
+    "cache gradients NaN": ("cache.trans_grad", lambda v: _set(v, (0, 0, 0), np.nan),
+                            "record trans grad are not finite"),
+    "cache negative radius": ("cache.radius", lambda v: _set(v, 0, -1.0),
+                              "record radii are not finite and positive"),
+    "cache cell fraction 0": ("cache.cell_fraction", lambda v: np.array(0.0),
+                              "cell_fraction = 0.0 is outside"),
+    "cache cell fraction 1e-300": ("cache.cell_fraction", lambda v: np.array(1e-300),
+                                   "cell_fraction = 1e-300 is outside"),
+    "cache channels": ("cache.channels", lambda v: np.array(4),
+                       "channel count disagrees"),
+    "shadow representative beyond": ("shadow_photons.rep_index",
+                                     lambda v: _set(v, 0, np.int32(2 ** 30)),
+                                     "representatives index photons that do not exist"),
+    "shadow class 7": ("shadow_photons.rep_class", lambda v: _set(v, 0, 7),
+                       "representative classes are not lit, umbra or penumbra"),
+    "shadow slice beyond": ("shadow_photons.slices.values", lambda v: v + 10 ** 9,
+                            "slices reach outside the arrays"),
+}
+
+
+@pytest.mark.parametrize("damage", list(DAMAGES))
+def test_damaged_arrays_are_refused_with_the_entry_and_the_problem(saved, tmp_path, damage):
+    """Each rule of the load's checks against one damage it exists for: without the rule the
+    file loads (and renders NaN, negative radiance, hangs in the cache's grid, or fails deep
+    in the renderer with a traceback), so each case fails if its rule is removed."""
+    key, change, said = DAMAGES[damage]
+    path = _rewrite(saved, tmp_path / "damaged.npz",
+                    **{key.replace(".", "__", 1): _changed(saved, key, change)})
+    message = _refused(path)
+    assert "damaged.npz" in message and said in message, message
+
+
+def test_the_report_s_counts_must_match_the_arrays(saved, tmp_path):
+    from lanterna.engine.npzjson import pack_json, unpack_json
+
+    report = unpack_json(_entry(saved, "lanterna.report"))
+    report["photons"]["stored"] += 1
+    path = _rewrite(saved, tmp_path / "counts.npz", lanterna__report=pack_json(report))
+    assert "but the file's report says" in _refused(path)
+
+
+def _write_npz_member(path, name, header_shape, payload: bytes, dtype="<f4"):
+    """An .npz with one member whose .npy header promises ``header_shape`` but holds
+    ``payload``: the size the zip declares and the header then disagree."""
+    import io
+    import zipfile
+
+    buffer = io.BytesIO()
+    np.lib.format.write_array_header_1_0(buffer, {"descr": dtype, "fortran_order": False,
+                                                  "shape": header_shape})
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as zf:
+        zf.writestr(name + ".npy", buffer.getvalue() + payload)
+
+
+def test_declared_sizes_are_checked_before_anything_is_decompressed(saved, tmp_path,
+                                                                    monkeypatch):
+    """An entry whose header promises 4e9 x 3 floats (45 GiB) is refused from its header and
+    the zip's directory: the arrays are never read (np.load is not even called)."""
+    import zipfile
+
+    with zipfile.ZipFile(saved) as src:
+        members = {i.filename: src.read(i) for i in src.infolist()}
+    path = tmp_path / "huge.npz"
+    import io
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(header, {"descr": "<f4", "fortran_order": False,
+                                                  "shape": (4_000_000_000, 3)})
+    members["photons.power.npy"] = header.getvalue() + b"\0" * 64
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as dst:
+        for name, blob in members.items():
+            dst.writestr(name, blob)
+    loads = []
+    monkeypatch.setattr(np, "load", lambda *a, **k: loads.append(a) or (_ for _ in ()).throw(
+        AssertionError("np.load was called")))
+    message = _refused(path)
+    assert "'photons.power' declares" in message and "its header promises" in message
+    assert loads == []
+    # A consistent but huge file is refused against the memory budget, still unread.
+    monkeypatch.setattr(A, "available_memory", lambda: 1 << 20)
+    message = _refused(saved)
+    assert "is refused: its arrays would need" in message and loads == []

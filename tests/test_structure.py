@@ -4,7 +4,8 @@
   add-on's ``__init__.py``), imports inside functions included: the imports form a ladder.
 * No module uses another module's ``_private`` name (``from m import _x`` or ``m._x``).
 * The core (``engine/`` but ``engine/blender/``) never imports ``bpy``; the leaves of the ladder
-  (``settings``, ``sampling``, ``scene``, ``memory``, ``npzjson``) import no stage.
+  (``settings``, ``sampling``, ``scene``, ``memory``, ``npzjson``, ``archive``) import no
+  stage.
 * The ladder as the README's Layout section writes it: each module imports only modules listed
   at or below its own rung.
 
@@ -21,7 +22,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = "lanterna"
 FOLDERS = ("engine", "ops", "ui", "bench")
-LEAVES = ("settings", "sampling", "scene", "memory", "npzjson")
+LEAVES = ("settings", "sampling", "scene", "memory", "npzjson", "archive")
 
 
 def module_files(root: Path, package: str = PACKAGE) -> dict[str, Path]:
