@@ -52,6 +52,8 @@ MAX_COORDINATE = 1e12
 # (linear in the power), 1e38 W is 18 % off, 1e40 W gives inf and NaN. 1e30 keeps 1e8 of
 # headroom, the factor 1 / r^2 of a light 1e-4 m from a surface.
 MAX_VALUE = 1e30
+# Area lights with sides further apart than this are skipped (``Scene.validate``).
+MAX_AREA_ASPECT = 1e6
 
 
 def _rgb(value, name: str, what: str) -> np.ndarray:
@@ -397,6 +399,13 @@ class Scene:
                     self.warnings.append(
                         f"{', '.join(names)}: skipped {int(mask.sum())} triangles with {reason}")
             self.stats["skipped_triangles"] = int((~keep).sum())
+        self._check_lights()
+        cam = self.camera
+        if not cam.clip_end > cam.clip_start:
+            text = (f"{cam.name}: clip start {cam.clip_start:g} m is not before clip end "
+                    f"{cam.clip_end:g} m, so the camera sees nothing and the picture is black")
+            if text not in self.warnings:          # validate may run more than once
+                self.warnings.append(text)
         self.triangles = np.ascontiguousarray(tris[keep])
         self.material_ids = np.ascontiguousarray(mids[keep])
         self.object_ids = np.ascontiguousarray(oids[keep])
@@ -412,6 +421,28 @@ class Scene:
                 normals = normals / lengths[..., None]
             self.shading_normals = np.ascontiguousarray(normals, dtype=np.float32)
         return self
+
+    def _check_lights(self):
+        """Drop, with a warning naming it, every area light that cannot be sampled: an area
+        that is not finite and positive, a radiance beyond ``MAX_VALUE``, or sides further apart
+        than ``MAX_AREA_ASPECT`` (1e30 x 1e-30 m rendered black without a word; the light
+        samplers' irradiance, measured under a strip 2 m up, is within 0.5 % of the closed form
+        up to an aspect of 1e7 and 0 at 1e8)."""
+        kept = []
+        for light in self.lights:
+            if isinstance(light, AreaLight):
+                area = light.area
+                sides = np.linalg.norm(light.axis_u), np.linalg.norm(light.axis_v)
+                aspect = max(sides) / min(sides) if min(sides) > 0 else np.inf
+                radiance = light.power / (np.pi * area) if area > 0 else np.full(3, np.inf)
+                if not (np.isfinite(area) and area > 0 and aspect <= MAX_AREA_ASPECT
+                        and np.all(radiance <= MAX_VALUE)):
+                    self.warnings.append(
+                        f"{light.name}: an area light of {2 * sides[0]:g} x {2 * sides[1]:g} m "
+                        f"(area {area:g} m^2) cannot be sampled; skipped")
+                    continue
+            kept.append(light)
+        self.lights = kept
 
     def _check_materials(self):
         """The materials again (their fields can be set after construction): finite and >= 0,

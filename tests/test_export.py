@@ -315,6 +315,29 @@ def test_diffuse_emission_mix_and_add_shaders():
     assert sum("'TooBright'" in w and "exceeds 1" in w for w in s.warnings) == 1
 
 
+def test_a_loop_of_shader_nodes_is_named_in_a_warning():
+    """Two Mix Shader nodes feeding each other: Blender marks the link that closes the loop
+    invalid and Cycles ignores it; the export did too, without a word (the material came out
+    black). Now the warning names the material and both nodes."""
+    scene = reset()
+    add_camera(scene)
+    mat = new_material("Knot")
+    tree = mat.node_tree
+    first, second = tree.nodes.new("ShaderNodeMixShader"), tree.nodes.new("ShaderNodeMixShader")
+    first.name, second.name = "Mix A", "Mix B"
+    diffuse = tree.nodes.new("ShaderNodeBsdfDiffuse")
+    tree.links.new(diffuse.outputs[0], first.inputs[2])
+    tree.links.new(first.outputs[0], second.inputs[1])
+    tree.links.new(second.outputs[0], first.inputs[1])
+    set_surface(mat, second)
+    cube = add_cube(scene)
+    cube.data.materials.append(mat)
+    exported = export()
+    loops = [w for w in exported.warnings if "closes a loop of nodes" in w]
+    assert loops and all("Material 'Knot'" in w for w in loops), exported.warnings
+    assert any("'Mix A'" in w and "'Mix B'" in w for w in loops), loops
+
+
 def test_texture_gives_one_warning_and_default_colour():
     scene = reset()
     add_camera(scene)

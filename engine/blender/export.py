@@ -278,15 +278,22 @@ class _NodeReader:
         self.warn = warn
 
     # Links ---------------------------------------------------------------------------------
-    @staticmethod
-    def source(socket):
+    def source(self, socket):
         """(node, output socket) feeding input ``socket``, through reroutes and muted nodes;
-        None when nothing (or a muted link) feeds it."""
+        None when nothing (or a muted link) feeds it. A link Blender marks invalid (one that
+        closes a loop of nodes, which Blender and Cycles ignore) feeds nothing, with a warning
+        naming the nodes."""
         for _ in range(256):
             if socket is None or not socket.is_linked:
                 return None
             link = socket.links[0]
-            if getattr(link, "is_muted", False) or not getattr(link, "is_valid", True):
+            if getattr(link, "is_muted", False):
+                return None
+            if not getattr(link, "is_valid", True):
+                self.warn(f"{self.owner}: the link from '{link.from_node.name}' to "
+                          f"'{link.to_node.name}' closes a loop of nodes, which Blender and "
+                          f"Cycles ignore; {link.to_socket.name} of '{link.to_node.name}' gets "
+                          "nothing")
                 return None
             node, out = link.from_node, link.from_socket
             if node.type == "REROUTE":
