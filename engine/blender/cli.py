@@ -1,9 +1,10 @@
-"""The ``lanterna`` command: render a .blend (or a seed scene) to EXR, save the seed scenes,
-run the benchmarks.
+"""The ``lanterna`` command: render a .blend, an .ase or a seed scene to EXR, bake a scene's
+maps, save the seed scenes, run the benchmarks.
 
 Usage
 -----
-``lanterna render [SCENE.blend] -o OUT.exr [--png OUT.png] [--report REPORT.json]``
+``lanterna render [SCENE.blend | SCENE.ase [--materials FILE.mat]] -o OUT.exr [--png OUT.png]``
+    ``[--report REPORT.json] [--maps MAPS.npz]``
     ``[--sensitivity P2|auto] [--knee P1]``
     ``[--scene scene1|scene2] [--resolution WxH] [--samples N] [--light-samples N]``
     ``[--bounces N] [--seed N] [--threads N] [--mode full|photon-map] [--photons N]``
@@ -13,7 +14,14 @@ Usage
     ``[--dry-run]``
 
     Renders the active scene of ``SCENE.blend`` with Lanterna (whatever engine the file names),
-    or the seed's Scene 1 (``--scene`` picks another) when no file is given. Flags override
+    an ``.ase`` scene imported as File > Import > ASE does (its companion ``.mat`` file next to
+    it, or ``--materials``), or the seed's Scene 1 (``--scene`` picks another) when no file is
+    given. ``--maps`` renders with maps from ``lanterna bake`` (or the add-on's Save) instead
+    of building them; maps made for another scene or other map settings are refused, naming
+    what differs. A ``.blend`` is read and rendered in a child process: Blender's reader can
+    crash on a damaged file (a segmentation fault), which is then reported as
+    ``lanterna: error: FILE: Blender could not read it (damaged file?)``, status 2 (measured
+    cost of the child: about 0.1 s a render). Flags override
     the scene's ``Scene.lanterna`` settings; ``--resolution`` sets the full frame at 100 %.
     A render region (border) in the file is honoured as Blender does: with Crop the EXR holds
     the region only, otherwise the full frame with zeros outside the region.
@@ -26,6 +34,10 @@ Usage
     memory (``engine/estimate.py``) and exits 0 without rendering or writing anything (no
     ``-o`` needed). A render whose estimated memory exceeds what is available is refused
     before any work (status 2).
+
+``lanterna bake [SCENE.blend | SCENE.ase | --scene NAME] -o MAPS.npz [the render's settings]``
+    Every stage but the camera (photon map, irradiance cache, shadow photons), saved to
+    ``MAPS.npz`` for ``render --maps`` or the add-on's Load.
 
 ``lanterna tonemap IN.exr OUT.png [--sensitivity P2|auto] [--knee P1]``
     The seed's conversion of radiance to RGB (section 11.2, Fig. 11.1; section 12.2.1):
@@ -196,16 +208,43 @@ def _setting_flag(parser, name: str) -> None:
                             help=text)
 
 
+def _scene_flags(parser, verb: str) -> None:
+    """The scene to use and the render settings, shared by ``render`` and ``bake``."""
+    parser.add_argument("blend", nargs="?", metavar="SCENE",
+                        help=f"the .blend or .ase to {verb} (default: the seed's Scene 1)")
+    parser.add_argument("--scene", choices=SEED_SCENES, default=None,
+                        help=f"{verb} a seed scene built by code instead of a file")
+    parser.add_argument("--materials", metavar="FILE.mat",
+                        help="an .ase scene's companion material file (default: the .mat of "
+                             "the same name next to it)")
+    parser.add_argument("--resolution", type=_resolution, metavar="WxH",
+                        help="full-frame size in pixels (percentage set to 100)")
+    for name in ("samples", "light_samples", "bounces", "mode", "photons", "photon_k",
+                 "photon_radius", "photon_filter", "preset", "indirect"):
+        _setting_flag(parser, name)
+    parser.add_argument("--gather", type=_grid, metavar="MxN",
+                        help="final gather strata: M in theta x N in phi (default "
+                             f"{RENDER_DEFAULTS['gather_m']}x{RENDER_DEFAULTS['gather_n']})")
+    for name in ("gather_guided", "cache_error"):
+        _setting_flag(parser, name)
+    parser.add_argument("--no-shadow-photons", action="store_true",
+                        help="trace every shadow ray (no lit/umbra classification)")
+    parser.add_argument("--no-cache-refine", action="store_true",
+                        help="place cache records by Ward's geometric weight only (no check "
+                             "against the neighbours' gathers)")
+    for name in ("photon_lookups", "seed", "threads"):
+        _setting_flag(parser, name)
+    parser.add_argument("--quiet", action="store_true", help="no progress line")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog=PROG, description="Lanterna: photon-mapping renderer for Blender scenes.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
 
-    render = sub.add_parser("render", help="render a .blend or a seed scene to EXR",
-                            description="Render a .blend (or the seed's Scene 1) to OpenEXR.")
-    render.add_argument("blend", nargs="?", metavar="SCENE.blend",
-                        help="the .blend to render (default: the seed's Scene 1)")
-    render.add_argument("--scene", choices=SEED_SCENES, default=None,
-                        help="render a seed scene built by code instead of a file")
+    render = sub.add_parser("render", help="render a .blend, an .ase or a seed scene to EXR",
+                            description="Render a .blend or an .ase scene (or the seed's Scene "
+                                        "1) to OpenEXR.")
+    _scene_flags(render, "render")
     render.add_argument("-o", "--output", metavar="OUT.exr",
                         help="the OpenEXR file to write (R, G, B float32, linear); required "
                              "unless --dry-run")
@@ -220,27 +259,21 @@ def build_parser() -> argparse.ArgumentParser:
                         help="extra passes written as EXR layers (Direct.R, ...): comma-separated "
                              "from direct, indirect, emission, photon-map, cache-points, photons, "
                              "shadow-classes, cache-usage, or all")
-    render.add_argument("--resolution", type=_resolution, metavar="WxH",
-                        help="full-frame size in pixels (percentage set to 100)")
-    for name in ("samples", "light_samples", "bounces", "mode", "photons", "photon_k",
-                 "photon_radius", "photon_filter", "preset", "indirect"):
-        _setting_flag(render, name)
-    render.add_argument("--gather", type=_grid, metavar="MxN",
-                        help="final gather strata: M in theta x N in phi (default "
-                             f"{RENDER_DEFAULTS['gather_m']}x{RENDER_DEFAULTS['gather_n']})")
-    for name in ("gather_guided", "cache_error"):
-        _setting_flag(render, name)
-    render.add_argument("--no-shadow-photons", action="store_true",
-                        help="trace every shadow ray (no lit/umbra classification)")
-    render.add_argument("--no-cache-refine", action="store_true",
-                        help="place cache records by Ward's geometric weight only (no check "
-                             "against the neighbours' gathers)")
-    for name in ("photon_lookups", "seed", "threads"):
-        _setting_flag(render, name)
-    render.add_argument("--quiet", action="store_true", help="no progress line")
+    render.add_argument("--maps", metavar="MAPS.npz",
+                        help="render with maps baked before (lanterna bake) for this scene and "
+                             "these map settings instead of building them")
     render.add_argument("--dry-run", action="store_true",
                         help="print the plan and each stage's estimated time and memory, "
                              "render and write nothing (engine/estimate.py)")
+
+    bake = sub.add_parser("bake", help="bake a scene's maps (photons, cache, shadow photons)",
+                          description="Build the photon map, the irradiance cache and the "
+                                      "shadow photons of a scene, as a render would, and save "
+                                      "them to an .npz that 'lanterna render --maps' and the "
+                                      "add-on's Load can use.")
+    _scene_flags(bake, "bake")
+    bake.add_argument("-o", "--output", required=True, metavar="MAPS.npz",
+                      help="the maps file to write")
 
     scene = sub.add_parser("scene", help="save a seed scene as a .blend",
                            description="Build one of the seed's scenes and save it.")
@@ -284,18 +317,42 @@ def _check_output(path: str, suffix: str, flag: str) -> str:
 
 def check_blend(path: str) -> str:
     path = os.path.abspath(os.path.expanduser(path))
+    _check_readable(path)
+    with open(path, "rb") as f:
+        head = f.read(8)
+    if not head.startswith(BLEND_MAGIC):
+        raise UsageError(f"{path}: not a .blend file")
+    return path
+
+
+def _check_readable(path: str) -> None:
     if not os.path.exists(path):
         raise UsageError(f"{path}: no such file")
     if not os.path.isfile(path):
         raise UsageError(f"{path}: not a file")
     try:
         with open(path, "rb") as f:
-            head = f.read(8)
+            f.read(1)
     except OSError as exc:
         raise UsageError(f"{path}: cannot read ({exc.strerror})") from None
-    if not head.startswith(BLEND_MAGIC):
-        raise UsageError(f"{path}: not a .blend file")
-    return path
+
+
+def _scene_input(args) -> tuple[str, str | None]:
+    """(kind, path) of the scene a command reads: ("blend", file), ("ase", file) or ("seed",
+    None); every problem found before Blender is started."""
+    if args.blend and args.scene:
+        raise UsageError("give either SCENE or --scene, not both")
+    if args.blend and args.blend.lower().endswith(".ase"):
+        path = os.path.abspath(os.path.expanduser(args.blend))
+        _check_readable(path)
+        if args.materials:
+            _check_readable(os.path.abspath(os.path.expanduser(args.materials)))
+        return "ase", path
+    if args.materials:
+        raise UsageError("--materials goes with an .ase scene")
+    if args.blend:
+        return "blend", check_blend(args.blend)
+    return "seed", None
 
 
 # -- Blender side -----------------------------------------------------------------------------
@@ -308,13 +365,137 @@ def _ensure_registered():
 def open_blend(path: str):
     import bpy
 
+    _stage("open")
     try:
         bpy.ops.wm.open_mainfile(filepath=path, load_ui=False, use_scripts=False)
     except RuntimeError as exc:
         reason = " ".join(str(exc).split())
         reason = reason[len("Error: "):] if reason.startswith("Error: ") else reason
         raise UsageError(f"{path}: cannot be opened: {reason}") from None
+    _stage("opened")
     return bpy.context.scene
+
+
+def _open_ase(path: str, materials: str | None):
+    """A fresh empty scene with the .ase imported into it (``ops/import_ase.py``: meshes,
+    materials from the companion .mat file, lights, camera)."""
+    import bpy
+
+    from ...ops.import_ase import import_ase
+    from ..ase import AseError
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    try:
+        summary = import_ase(path, bpy.context, materials and os.path.abspath(
+            os.path.expanduser(materials)))
+    except AseError as exc:
+        raise UsageError(str(exc)) from None
+    for text in summary.get("warnings", ()):
+        print(f"{PROG}: warning: {' '.join(str(text).split())}", file=sys.stderr)
+    return bpy.context.scene
+
+
+class _Loaded:
+    """A scene as a render, a bake or a dry run reads it: the Blender scene, the exported
+    ``Scene``, the resolved settings, where it came from and how long loading took."""
+
+    def __init__(self, args, kind: str, path: str | None):
+        import bpy  # noqa: F401  (slow import, only now)
+        from ..scene import SceneError
+        from . import export, seed_scenes
+
+        _ensure_registered()
+        t0 = time.perf_counter()
+        if kind == "blend":
+            scene = open_blend(path)
+        elif kind == "ase":
+            scene = _open_ase(path, args.materials)
+        else:
+            scene = seed_scenes.build(args.scene or "scene1")
+        _apply_overrides(scene, args)
+        self.load_seconds = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        self.scene = scene
+        self.source = path or f"seed:{args.scene or 'scene1'}"
+        self.resolution = export.render_resolution(scene.render)
+        if self.resolution[0] < 1 or self.resolution[1] < 1:
+            raise UsageError(f"the scene's resolution is {self.resolution[0]}x"
+                             f"{self.resolution[1]} pixels")
+        self.border = export.render_border(scene.render, self.resolution)
+        try:
+            self.lscene = export.export_scene(bpy.context.evaluated_depsgraph_get(),
+                                              resolution=self.resolution, border=self.border)
+            self.settings = export.export_settings(scene).resolved()   # the preset applied
+            self.settings.validate()
+        except SceneError as exc:
+            raise UsageError(str(exc)) from None
+        self.export_seconds = time.perf_counter() - t0
+        _stage("render")
+
+
+# -- A .blend in a child process: Blender's reader can crash on a damaged file -----------------
+STAGE_FILE_ENV = "LANTERNA_STAGE_FILE"
+
+
+def _stage(name: str) -> None:
+    """Tell the parent process (``_run_isolated``) which step this child has reached."""
+    path = os.environ.get(STAGE_FILE_ENV)
+    if path:
+        with open(path, "w", encoding="ascii") as f:
+            f.write(name)
+        if os.environ.get("LANTERNA_TEST_CRASH_AT") == name:     # tests: a crash right here
+            os.abort()
+
+
+def _crashed(code: int) -> bool:
+    """A child that died of a signal (POSIX: negative code) or of an exception Windows raised
+    (an NTSTATUS error code such as 0xC0000005, an access violation)."""
+    return code < 0 or code >= 0xC0000000
+
+
+def _run_isolated(argv: list[str], blend: str) -> int:
+    """The command again in a child process; this one only waits. Blender's .blend reader
+    does not survive every damaged file: a flipped bit can crash it (a segmentation fault,
+    no Python exception) inside ``open_mainfile``. The child tells which step it reached
+    (``_stage``), so a crash while reading is reported as a damaged file, exit 2, and one
+    later as an internal error, exit 1. Costs one more interpreter start (about 0.3 s);
+    Ctrl-C reaches the child, which stops between batches and writes nothing."""
+    import subprocess
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="lanterna-") as tmp:
+        stage_file = os.path.join(tmp, "stage")
+        env = dict(os.environ, **{STAGE_FILE_ENV: stage_file})
+        with _sigint_ignored():
+            code = subprocess.call([sys.executable, "-m", f"{__package__}.cli", *argv], env=env)
+        if not _crashed(code):
+            return code
+        try:
+            with open(stage_file, encoding="ascii") as f:
+                stage = f.read().strip()
+        except OSError:
+            stage = "start"
+    if stage == "open":
+        print(f"{PROG}: error: {blend}: Blender could not read it (damaged file?)",
+              file=sys.stderr)
+        return EXIT_USAGE
+    when = "before reading" if stage == "start" else "after reading"
+    print(f"{PROG}: internal error: Blender crashed (exit code {code}) {when} {blend}",
+          file=sys.stderr)
+    return EXIT_INTERNAL
+
+
+@contextlib.contextmanager
+def _sigint_ignored():
+    try:
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:                              # not the main thread
+        previous = None
+    try:
+        yield
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
 
 
 def _apply_overrides(scene, args) -> None:
@@ -417,10 +598,9 @@ def _full_frame(image, scene_camera, crop: bool):
 def cmd_render(args) -> int:
     started = time.perf_counter()
     # 1. Everything that can be checked without Blender, before any work.
-    if args.blend and args.scene:
-        raise UsageError("give either SCENE.blend or --scene, not both")
+    kind, path = _scene_input(args)
     if args.dry_run:   # issue 6: the estimate only; no output is checked or written
-        return _dry_run(args)
+        return _dry_run(args, kind, path)
     if not args.output:
         raise UsageError("the following arguments are required: -o/--output")
     outputs = {"exr": _check_output(args.output, ".exr", "-o")}
@@ -433,35 +613,21 @@ def cmd_render(args) -> int:
         outputs["report"] = _check_output(args.report, ".json", "--report")
     if len(set(outputs.values())) != len(outputs):
         raise UsageError("the output files must be different")
-    blend = check_blend(args.blend) if args.blend else None
+    maps_path = None
+    if args.maps:
+        maps_path = os.path.abspath(os.path.expanduser(args.maps))
+        _check_readable(maps_path)
 
-    # 2. Load the scene.
-    import bpy  # noqa: F401  (slow import, only now)
+    # 2. Load the scene and export it (3).
     from ..scene import SceneError
     from .. import imageio, pipeline
+    from ..artifacts import load_artifacts
     from ..memory import peak_memory
-    from . import export, seed_scenes
 
-    _ensure_registered()
-    t0 = time.perf_counter()
-    scene = open_blend(blend) if blend else seed_scenes.build(args.scene or "scene1")
-    _apply_overrides(scene, args)
-    load_seconds = time.perf_counter() - t0
-
-    # 3. Export.
-    t0 = time.perf_counter()
-    depsgraph = bpy.context.evaluated_depsgraph_get()
-    resolution = export.render_resolution(scene.render)
-    if resolution[0] < 1 or resolution[1] < 1:
-        raise UsageError(f"the scene's resolution is {resolution[0]}x{resolution[1]} pixels")
-    border = export.render_border(scene.render, resolution)
-    try:
-        lscene = export.export_scene(depsgraph, resolution=resolution, border=border)
-        settings = export.export_settings(scene).resolved()    # the preset's values in place
-        settings.validate()
-    except SceneError as exc:
-        raise UsageError(str(exc)) from None
-    export_seconds = time.perf_counter() - t0
+    loaded = _Loaded(args, kind, path)
+    scene, lscene, settings = loaded.scene, loaded.lscene, loaded.settings
+    resolution, border = loaded.resolution, loaded.border
+    load_seconds, export_seconds = loaded.load_seconds, loaded.export_seconds
     warnings = []
 
     def warn(text):
@@ -472,6 +638,12 @@ def cmd_render(args) -> int:
 
     for text in lscene.warnings:
         warn(text)
+    artifacts = None
+    if maps_path:
+        try:
+            artifacts = load_artifacts(maps_path, lscene, settings)
+        except SceneError as exc:                  # ArtifactError: names the file and why
+            raise UsageError(str(exc)) from None
 
     # 4. Render.
     progress = _Progress(enabled=not args.quiet)
@@ -479,7 +651,8 @@ def cmd_render(args) -> int:
     with _sigint_flag() as interrupted:
         try:
             result = pipeline.render(lscene, settings, progress=progress,
-                                     cancelled=lambda: interrupted["set"], passes=args.passes)
+                                     cancelled=lambda: interrupted["set"], passes=args.passes,
+                                     artifacts=artifacts)
         except SceneError as exc:
             raise UsageError(str(exc)) from None
         finally:
@@ -496,7 +669,8 @@ def cmd_render(args) -> int:
     t0 = time.perf_counter()
     report = {
         "lanterna": _version(),
-        "scene": blend or f"seed:{args.scene or 'scene1'}",
+        "scene": loaded.source,
+        "maps": maps_path,
         "blender_scene": scene.name,
         "resolution": list(resolution),
         "border": list(border) if border else None,
@@ -541,37 +715,23 @@ def cmd_render(args) -> int:
     return EXIT_OK
 
 
-def _dry_run(args) -> int:
+def _dry_run(args, kind: str, path: str | None) -> int:
     """``render --dry-run``: export as a render would, print the plan and the estimate of each
     stage (``engine/estimate.py``), render and write nothing."""
-    blend = check_blend(args.blend) if args.blend else None
-    import bpy  # noqa: F401
     from ..scene import SceneError
     from .. import estimate
-    from . import export, seed_scenes
 
-    _ensure_registered()
-    scene = open_blend(blend) if blend else seed_scenes.build(args.scene or "scene1")
-    _apply_overrides(scene, args)
-    resolution = export.render_resolution(scene.render)
-    if resolution[0] < 1 or resolution[1] < 1:
-        raise UsageError(f"the scene's resolution is {resolution[0]}x{resolution[1]} pixels")
-    border = export.render_border(scene.render, resolution)
+    loaded = _Loaded(args, kind, path)
+    lscene, settings = loaded.lscene, loaded.settings
     try:
-        lscene = export.export_scene(bpy.context.evaluated_depsgraph_get(),
-                                     resolution=resolution, border=border)
-        settings = export.export_settings(scene).resolved()
-        settings.validate()
-        result = estimate.estimate_cost(lscene, settings, passes=args.passes)
-    except SceneError as exc:
-        raise UsageError(str(exc)) from None
-    except estimate.RatesError as exc:
+        result = estimate.estimate_cost(lscene, settings, passes=args.passes,
+                                        reused=bool(args.maps))
+    except (SceneError, estimate.RatesError) as exc:
         raise UsageError(str(exc)) from None
     for text in list(lscene.warnings) + list(result.warnings):
         print(f"{PROG}: warning: {' '.join(str(text).split())}", file=sys.stderr)
     w, h = lscene.camera.window_size
-    source = blend or f"seed:{args.scene or 'scene1'}"
-    print(f"{PROG}: dry run of {source}: {w}x{h} px, {settings.samples} spp, preset "
+    print(f"{PROG}: dry run of {loaded.source}: {w}x{h} px, {settings.samples} spp, preset "
           f"{settings.preset}, {result.workers} workers; rates {result.rates_source}")
     print("plan:")
     for stage, reason in result.plan.items():
@@ -619,6 +779,42 @@ def _version() -> str:
         return version("lanterna")
     except Exception:
         return "unknown"
+
+
+def cmd_bake(args) -> int:
+    """``lanterna bake``: every stage but the camera, saved as a maps file (``pipeline.bake``,
+    ``artifacts.save_artifacts``), for ``lanterna render --maps`` or the add-on's Load."""
+    kind, path = _scene_input(args)
+    output = _check_output(args.output, ".npz", "-o")
+    from ..scene import SceneError
+    from .. import pipeline
+    from ..artifacts import save_artifacts
+
+    loaded = _Loaded(args, kind, path)
+    for text in loaded.lscene.warnings:
+        print(f"{PROG}: warning: {' '.join(str(text).split())}", file=sys.stderr)
+    progress = _Progress(enabled=not args.quiet)
+    t0 = time.perf_counter()
+    with _sigint_flag() as interrupted:
+        try:
+            artifacts = pipeline.bake(loaded.lscene, loaded.settings, progress=progress,
+                                      cancelled=lambda: interrupted["set"])
+        except SceneError as exc:
+            raise UsageError(str(exc)) from None
+        finally:
+            progress.close()
+    if artifacts.report.get("cancelled") or interrupted["set"]:
+        print(f"{PROG}: cancelled; nothing written", file=sys.stderr)
+        return EXIT_CANCELLED
+    try:
+        save_artifacts(output, artifacts, scene_name=loaded.scene.name)
+    except SceneError as exc:
+        raise UsageError(str(exc)) from None
+    counts = artifacts.counts()
+    print(f"{PROG}: wrote {output} ({counts['photons']:,} photons, {counts['cache']:,} cache "
+          f"records, {counts['shadow_photons']:,} shadow photons) in "
+          f"{time.perf_counter() - t0:.2f} s")
+    return EXIT_OK
 
 
 def cmd_scene(args) -> int:
@@ -672,8 +868,11 @@ def main(argv=None) -> int:
         if argv and argv[0] == "bench":
             return cmd_bench(argv[1:])
         args = build_parser().parse_args(argv)
-        if args.command == "render":
-            return cmd_render(args)
+        if args.command in ("render", "bake"):
+            kind, path = _scene_input(args)
+            if kind == "blend" and STAGE_FILE_ENV not in os.environ:
+                return _run_isolated(argv, path)
+            return cmd_render(args) if args.command == "render" else cmd_bake(args)
         if args.command == "scene":
             return cmd_scene(args)
         if args.command == "tonemap":
