@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.lanterna-installed
 
-.PHONY: render test bench clean scenes extension test-compat
+.PHONY: render test bench clean scenes extension test-compat fuzz
 
 # Blender versions the add-on is tested against (make test-compat): bpy 4.2 LTS and 4.5 LTS in
 # their own environments, 5.0 in .venv. The Blender-facing tests (the rest need no bpy).
@@ -46,6 +46,12 @@ test-compat: $(STAMP) .venv-bpy42/.lanterna-installed .venv-bpy45/.lanterna-inst
 	    $(COMPAT_TESTS) || exit 1; \
 	  echo "== $$(( $$(date +%s) - start )) s"; \
 	done
+
+# The full fuzz run (tests/fuzz.py): 420 damaged .blend, ASE and maps inputs, a CSV and a
+# table by kind and outcome; about 15 minutes on 2 cores. make test runs a quick subset.
+fuzz: $(STAMP)
+	@mkdir -p out
+	$(PY) tests/fuzz.py --count 420 --csv out/fuzz.csv --work out/fuzz
 
 bench: $(STAMP)
 	$(VENV)/bin/lanterna bench

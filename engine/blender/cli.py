@@ -392,6 +392,8 @@ def _open_ase(path: str, materials: str | None):
         raise UsageError(str(exc)) from None
     for text in summary.get("warnings", ()):
         print(f"{PROG}: warning: {' '.join(str(text).split())}", file=sys.stderr)
+    if bpy.context.scene.camera is None:
+        raise UsageError(f"{path}: the scene holds no camera to render from")
     return bpy.context.scene
 
 
