@@ -63,7 +63,9 @@ CORNELL_COLOURS = {
 CORNELL_POWER = 30.0    # W, area light: lit walls at radiance ~0.1-1 with all bounces
 
 __all__ = ["SCENES", "GI_SCENES", "RESOLUTION", "COLOURS", "WORLD_GREY", "CORNELL_RESOLUTION",
-           "CORNELL_COLOURS", "CORNELL_POWER", "build", "build_cornell", "lights_out_of_frame"]
+           "CORNELL_COLOURS", "CORNELL_POWER", "CORNELL_MM_RESOLUTION", "CORNELL_MM_COLOURS",
+           "CORNELL_MM_STRENGTH", "CORNELL_MM_LIGHT_DROP", "build", "build_cornell",
+           "build_cornell_original", "lights_out_of_frame"]
 
 
 # --- building blocks ----------------------------------------------------------------------
@@ -341,8 +343,101 @@ def build_cornell():
     return scene
 
 
+# --- the original Cornell box, in millimetres ----------------------------------------------
+# The Cornell University "Cornell Box data" page (graphics.cornell.edu/online/box/data.html):
+# y-up, millimetres, the camera at (278, 273, -800) looking +z. Converted to Blender's z-up by
+# the rotation of +90 degrees about x: (x, y, z)_data -> (x, -z, y) (a proper rotation, so red
+# stays on the left as seen from the camera and no winding flips); the numbers stay the data's
+# millimetres as Blender units (unit scale 1: neither Cycles nor Lanterna reads
+# ``unit_settings.scale_length``, and radiance is independent of the scale).
+CORNELL_MM_RESOLUTION = (64, 64)
+CORNELL_MM_COLOURS = {
+    "white": (0.73, 0.73, 0.73),
+    "red": (0.63, 0.065, 0.05),
+    "green": (0.14, 0.45, 0.09),
+}
+CORNELL_MM_STRENGTH = 50.0     # Emission strength = radiance of the light quad (white)
+# The data put the light quad in the ceiling's plane (y = 548.8, the ceiling has no hole):
+# coplanar, it z-fights with the ceiling in both renderers. Like most renditions (548.7) it is
+# lowered by CORNELL_MM_LIGHT_DROP [mm].
+CORNELL_MM_LIGHT_DROP = 0.1
+CORNELL_MM_DATA = {     # quads of the data page, [mm], y up
+    "Floor": ("white", [(552.8, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 559.2),
+                        (549.6, 0.0, 559.2)]),
+    "Ceiling": ("white", [(556.0, 548.8, 0.0), (556.0, 548.8, 559.2), (0.0, 548.8, 559.2),
+                          (0.0, 548.8, 0.0)]),
+    "Back Wall": ("white", [(549.6, 0.0, 559.2), (0.0, 0.0, 559.2), (0.0, 548.8, 559.2),
+                            (556.0, 548.8, 559.2)]),
+    "Right Wall": ("green", [(0.0, 0.0, 559.2), (0.0, 0.0, 0.0), (0.0, 548.8, 0.0),
+                             (0.0, 548.8, 559.2)]),
+    "Left Wall": ("red", [(552.8, 0.0, 0.0), (549.6, 0.0, 559.2), (556.0, 548.8, 559.2),
+                          (556.0, 548.8, 0.0)]),
+    "Short Block": ("white", [
+        (130.0, 165.0, 65.0), (82.0, 165.0, 225.0), (240.0, 165.0, 272.0), (290.0, 165.0, 114.0),
+        (290.0, 0.0, 114.0), (290.0, 165.0, 114.0), (240.0, 165.0, 272.0), (240.0, 0.0, 272.0),
+        (130.0, 0.0, 65.0), (130.0, 165.0, 65.0), (290.0, 165.0, 114.0), (290.0, 0.0, 114.0),
+        (82.0, 0.0, 225.0), (82.0, 165.0, 225.0), (130.0, 165.0, 65.0), (130.0, 0.0, 65.0),
+        (240.0, 0.0, 272.0), (240.0, 165.0, 272.0), (82.0, 165.0, 225.0), (82.0, 0.0, 225.0)]),
+    "Tall Block": ("white", [
+        (423.0, 330.0, 247.0), (265.0, 330.0, 296.0), (314.0, 330.0, 456.0), (472.0, 330.0, 406.0),
+        (423.0, 0.0, 247.0), (423.0, 330.0, 247.0), (472.0, 330.0, 406.0), (472.0, 0.0, 406.0),
+        (472.0, 0.0, 406.0), (472.0, 330.0, 406.0), (314.0, 330.0, 456.0), (314.0, 0.0, 456.0),
+        (314.0, 0.0, 456.0), (314.0, 330.0, 456.0), (265.0, 330.0, 296.0), (265.0, 0.0, 296.0),
+        (265.0, 0.0, 296.0), (265.0, 330.0, 296.0), (423.0, 330.0, 247.0), (423.0, 0.0, 247.0)]),
+}
+CORNELL_MM_LIGHT = [(343.0, 548.8, 227.0), (343.0, 548.8, 332.0), (213.0, 548.8, 332.0),
+                    (213.0, 548.8, 227.0)]
+CORNELL_MM_CAMERA = dict(position=(278.0, 273.0, -800.0), direction=(0.0, 0.0, 1.0),
+                         up=(0.0, 1.0, 0.0), lens_mm=35.0, film_mm=25.0)
+
+
+def _cornell_mm_to_blender(p):
+    """Data (x, y, z), y up -> Blender (x, -z, y), z up: +90 degrees about x."""
+    x, y, z = p
+    return (x, -z, y)
+
+
+def build_cornell_original(light_drop=None, strength=None):
+    """The original Cornell box (the data page's geometry, millimetres as Blender units, see
+    ``CORNELL_MM_DATA``), lit by its ceiling quad: an Emission-shader mesh of strength
+    ``CORNELL_MM_STRENGTH`` (both faces emit, as in Cycles), ``light_drop`` (default
+    ``CORNELL_MM_LIGHT_DROP``) mm under the ceiling. Diffuse BSDF (roughness 0) white 0.73,
+    red (0.63, 0.065, 0.05), green (0.14, 0.45, 0.09). The data's camera: 35 mm lens on a
+    25 mm film (39.3 degrees), 64 x 64 pixels, clip 10-10000 mm. Black world. The light is in
+    the frame, on purpose: both renderers draw an emissive mesh."""
+    drop = CORNELL_MM_LIGHT_DROP if light_drop is None else light_drop
+    scene = _reset()
+    scene.render.resolution_x, scene.render.resolution_y = CORNELL_MM_RESOLUTION
+    mats = {name: _material_diffuse(name.title(), colour)
+            for name, colour in CORNELL_MM_COLOURS.items()}
+    for name, (colour, points) in CORNELL_MM_DATA.items():
+        verts = [_cornell_mm_to_blender(p) for p in points]
+        faces = [tuple(range(i, i + 4)) for i in range(0, len(verts), 4)]
+        _mesh_object(name, verts, faces, mats[colour])
+    light = _material_emission("Light", (1.0, 1.0, 1.0),
+                               CORNELL_MM_STRENGTH if strength is None else strength)
+    verts = [_cornell_mm_to_blender((x, y - drop, z)) for x, y, z in CORNELL_MM_LIGHT]
+    _mesh_object("Emitter", verts, [(0, 1, 2, 3)], light)
+
+    c = CORNELL_MM_CAMERA
+    cam_data = bpy.data.cameras.new("Camera")
+    cam_data.sensor_fit = "AUTO"
+    cam_data.sensor_width = c["film_mm"]
+    cam_data.lens = c["lens_mm"]
+    cam_data.clip_start = 10.0
+    cam_data.clip_end = 10000.0
+    cam = bpy.data.objects.new("Camera", cam_data)
+    scene.collection.objects.link(cam)
+    eye = _cornell_mm_to_blender(c["position"])
+    target = _cornell_mm_to_blender(tuple(p + d for p, d in zip(c["position"], c["direction"])))
+    _look_at(cam, eye, target)          # world up +z: the data's up (0, 1, 0)
+    scene.camera = cam
+    return scene
+
+
 GI_SCENES = {
     "cornell": build_cornell,
+    "cornell_mm": build_cornell_original,
 }
 
 

@@ -87,11 +87,12 @@ SAMPLES = {          # per seed; every bright block's relative SE comes out < 0.
 # --gi: all bounces, written to cycles_gi/
 OUT_GI = HERE / "cycles_gi"
 GI_BOUNCES = 64
-GI_SCENES = ("scene1", "cornell", "scene2")
+GI_SCENES = ("scene1", "cornell", "scene2", "cornell_mm")
 GI_SAMPLES = {       # per seed; every bright block's relative SE comes out < 0.3 %
     "scene1": 768,
     "cornell": 2560,
     "scene2": 2048,    # at 4x the resolution (GI_SUPERSAMPLE): see below and the README
+    "cornell_mm": 4096,
 }
 GI_RESOLUTION = {"scene1": (160, 120), "scene2": (160, 120)}   # others: the builder's own
 # Scene 2 is lit almost only by bounced light and Cycles converges slowly on it: it is
@@ -122,9 +123,10 @@ def _build_gi(name: str):
         label += " at {}x{}".format(*GI_RESOLUTION[name])
     bpy.context.view_layer.update()
     # Lights Cycles does not draw may sit in the frame: radius-0 point/spot lights and lights
-    # hidden from the camera.
+    # hidden from the camera; and emissive meshes, which both renderers draw (``cornell_mm``'s
+    # ceiling quad is in view on purpose).
     inside = [n for n in parity_scenes.lights_out_of_frame(scene)
-              if scene.objects[n].visible_camera
+              if scene.objects[n].visible_camera and scene.objects[n].type != "MESH"
               and not (scene.objects[n].type == "LIGHT" and scene.objects[n].data.type in
                        ("POINT", "SPOT") and scene.objects[n].data.shadow_soft_size == 0.0)]
     if inside:
