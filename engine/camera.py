@@ -25,17 +25,18 @@ from . import sampling
 
 
 def pixel_rays(camera, pixel_start: int, pixel_stop: int, samples: int, rng: np.random.Generator,
-               filter_width: float = 1.5, centres: bool = False):
+               filter_width: float = 1.5, centres: bool = False, pixels=None):
     """Rays for window pixels [pixel_start, pixel_stop) in row-major order, top row first.
 
     Returns (origins (P*S, 3) float32, directions (P*S, 3) float32 unit, tmax (P*S,)),
     samples of one pixel contiguous. ``centres``: every sample through the pixel's centre
-    (the irradiance cache's placement passes).
+    (the irradiance cache's placement passes). ``pixels``: these window pixels (row-major
+    indices) instead of the range.
     """
     x0, y0, x1, y1 = camera.border
     win_w, win_h = x1 - x0, y1 - y0
     full_w, full_h = camera.resolution
-    pix = np.arange(pixel_start, pixel_stop)
+    pix = np.arange(pixel_start, pixel_stop) if pixels is None else np.asarray(pixels, np.int64)
     row, col = np.divmod(pix, win_w)
     px = x0 + col                                   # full-frame column
     py = y0 + (win_h - 1 - row)                     # full-frame row from the bottom

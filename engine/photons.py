@@ -566,6 +566,52 @@ def auto_photon_count(pixels: int) -> int:
     return int(np.clip(2 * int(pixels), MIN_AUTO_PHOTONS, MAX_AUTO_PHOTONS))
 
 
+def photon_spacing(scene: Scene, stored: int) -> float:
+    """Mean distance between ``stored`` photons spread evenly over the scene's diffuse
+    surface area, sqrt(area / stored) [m] (0 without diffuse area or photons)."""
+    if len(scene.triangles) == 0 or stored == 0:
+        return 0.0
+    diffuse = MaterialTable(scene).is_diffuse[scene.material_ids]
+    area = float(scene.triangle_areas()[diffuse].sum())
+    return float(np.sqrt(area / stored)) if area > 0 else 0.0
+
+
+def in_crevice(scene: Scene, accel, pmap: PhotonMap, pool=None) -> np.ndarray:
+    """(P,) bool: photons stored under an occluder closer than the photons' mean spacing
+    (``photon_spacing``), measured along the normal on the side the photon arrived from.
+
+    An estimate (Eq. 9.11) takes the k nearest photons on the surface's plane and assumes their
+    density is smooth over its disc, of radius sqrt(k / pi) = 4 spacings at least (k = 50). A
+    crevice thinner than one spacing opens onto the surface beside it within a spacing, so the
+    disc of every point near its mouth takes the crevice's photons as its own. Where the
+    crevice is bright that is a halo of light that is not there: an emissive quad 0.1 mm under
+    a ceiling (the original Cornell box's light) sends half its flux from its back face into
+    the 0.1 mm gap, where the ceiling's irradiance is pi L, about 100 x the room's; estimates
+    on the visible ceiling 1, 2, 4 mm from the light's edge came out 23, 10 and 3.2 W/m^2
+    against 1.5-1.9 (the direct glow out of the gap included), and the room's indirect light
+    1 % too bright. Such photons are not stored (their paths go on: the light that leaves the
+    crevice is traced, stored and estimated where it lands); what a crevice holds cannot be
+    seen but through a gap thinner than a spacing, and the direct light there is exact.
+    The probe is one occlusion ray a photon, no longer than a spacing, in chunks on ``pool``
+    (4M photons: 0.9 s on one thread)."""
+    n = len(pmap)
+    out = np.zeros(n, bool)
+    reach = photon_spacing(scene, n)
+    if n == 0 or not reach > 0:
+        return out
+
+    def probe(a):
+        b = min(a + PHOTON_CHUNK, n)
+        normals = pmap.normals[a:b].astype(np.float32)
+        normals /= np.maximum(np.sqrt(sampling.dot_rows(normals, normals)), 1e-12)[:, None]
+        origins = accel.offset_origins(pmap.positions[a:b], normals, normals)
+        out[a:b] = accel.occluded(origins, normals, np.float32(reach))
+
+    starts = range(0, n, PHOTON_CHUNK)
+    list(pool.map(probe, starts)) if pool is not None else [probe(a) for a in starts]
+    return out
+
+
 def auto_max_radius(scene: Scene, stored: int, k: int) -> float:
     """Default cap on the gather radius [m]: four times the radius that holds ``k`` photons
     when the ``stored`` photons spread evenly over the scene's diffuse surface area. The cap
@@ -650,6 +696,13 @@ def build_photon_map(scene: Scene, accel, count: int, seed: int = 0, max_bounces
                                                     np.zeros((0, 3), np.float16), np.zeros((0, 3), np.float16),
                                                     np.zeros(0, np.uint8))
     stored_all = len(pmap)
+    # Photons in a crevice thinner than the photons' spacing are not kept (``in_crevice``).
+    t_crevice = time.perf_counter()
+    crevice = in_crevice(scene, accel, pmap, pool)
+    crevice_seconds = time.perf_counter() - t_crevice
+    crevice_flux = pmap.power[crevice].astype(np.float64).sum(axis=0)
+    if crevice.any():
+        pmap = pmap.subset(~crevice)
     direct_flux = pmap.power[pmap.bounces == 0].astype(np.float64).sum(axis=0)
     indirect_flux = pmap.power[pmap.bounces > 0].astype(np.float64).sum(axis=0)
     if keep == "indirect":
@@ -666,6 +719,8 @@ def build_photon_map(scene: Scene, accel, count: int, seed: int = 0, max_bounces
         "photons_per_light": emitted.per_light,
         "stored_all": int(stored_all), "stored": int(len(pmap)), "kept": keep,
         "flux_stored_direct": direct_flux.tolist(), "flux_stored_indirect": indirect_flux.tolist(),
+        "crevice_dropped": int(crevice.sum()), "flux_crevice": crevice_flux.tolist(),
+        "crevice_seconds": crevice_seconds,
         "bytes": int(pmap.nbytes), "bytes_per_photon": round(pmap.nbytes / max(len(pmap), 1), 2),
         "max_bounces": int(max_bounces),
         "emit_seconds": emit_seconds, "trace_seconds": trace_seconds,

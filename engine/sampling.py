@@ -28,6 +28,7 @@ STREAM_CAMERA = 1
 STREAM_LIGHT = 2
 STREAM_PHOTON = 3
 STREAM_GATHER = 4
+STREAM_EDGE = 5          # the camera's extra samples of emitter edges (pipeline.py)
 
 
 def rng_for(seed: int, stream: int, batch: int = 0) -> np.random.Generator:

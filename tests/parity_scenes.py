@@ -36,6 +36,10 @@ Global illumination (``GI_SCENES``, for the all-bounce references of ``make_cycl
   (0, -3.4, 1) looking at (0, 0, 1), horizontal FOV 60 degrees: the open front fills the
   height of the frame, black margins on both sides. ``CORNELL_RESOLUTION`` = 80 x 60.
 
+- ``cornell_mm`` (:func:`build_cornell_original`): the original Cornell box of the Cornell
+  University data page, in millimetres, its light quad an Emission mesh (strength 50) 0.1 mm
+  under the ceiling and in view, 64 x 64 (``CORNELL_MM_*`` below).
+
 Only ``bpy`` and ``mathutils``: no import of Lanterna, so the reference script can use it
 without the add-on.
 """

@@ -41,15 +41,16 @@ Diffuse BSDF, black world) rendered at 160 x 120 with its own camera; ``cornell`
 ``tests/parity_scenes.py:build_cornell`` (80 x 60, square area light hidden from the camera);
 ``scene2``, the seed's Scene 2 (``seed_scenes.build("scene2")``: closed room, radius-0 point
 light inside a ceiling tube, torus knot, red cylinder, Diffuse BSDF, black world) at 160 x 120
-with its own camera.
+with its own camera; ``cornell_mm``, ``tests/parity_scenes.py:build_cornell_original`` (the
+original Cornell box in millimetres, 64 x 64, its light quad an Emission mesh in view).
 Settings as above except ``max_bounces = diffuse_bounces = glossy_bounces =
 transmission_bounces = GI_BOUNCES`` (64), volume 0, transparent 8, caustics reflective and
 refractive on, ``blur_glossy = 0``, path guiding off; ``GI_SAMPLES[name]`` samples per seed,
-chosen so that every bright block's relative SE is < 0.3 % (measured 0.16 % and 0.11 %) for
-``scene1`` and ``cornell``; ``scene2`` (lit almost only indirectly, from the light pool and the
+chosen so that every bright block's relative SE is < 0.3 % (measured 0.16 %, 0.11 % and
+0.077 %) for ``scene1``, ``cornell`` and ``cornell_mm``; ``scene2`` (lit almost only indirectly, from the light pool and the
 tube's inside) is far noisier and got what fits in ~8 min (see ``tests/data/README.md``).
 Lights inside the frame are allowed only if Cycles does not draw them (radius-0 point/spot
-lights, ``visible_camera = False``).
+lights, ``visible_camera = False``), and emissive meshes, which both renderers draw.
 
 The core of Lanterna is not imported: only bpy, numpy, OpenEXR and ``tests/parity_scenes``
 (and, for ``--gi scene1`` / ``scene2``, Lanterna's bpy scene builder
