@@ -80,7 +80,8 @@ the cache is placed over it, so a tile (render border) renders as its part of th
 
 Time [s] (rates: seconds per unit, measured with ``rates.workers`` threads)
     validate = T r_validate; accel_build = T r_bvh
-    photons = N r_emit + rays r_photon_ray + stored_all r_photon_store(stored_all)
+    photons = N r_emit + rays r_photon_ray + stored_all (r_photon_store(stored_all) +
+              r_shadow_ray)   (the last: the crevice probe, one occlusion ray a stored photon)
     radiance_estimates = estimates r_estimate (k + 10) / 60 (the k-dependence assumed, not
     measured: a query's fixed cost and one per neighbour)
     irradiance_cache = F r_cache_pixel + records (G r_gather_ray + r_gather_point)
@@ -800,7 +801,7 @@ def estimate_from_facts(facts: SceneFacts, settings, rates: Rates | None = None,
             add("photons", 0.0, emitted=0, reused=1)
         else:
             add("photons", emitted * r["photon_emit"] + rays * r["photon_ray"]
-                + stored_all * r["photon_store"], stored * PHOTON_BYTES,
+                + stored_all * (r["photon_store"] + r["shadow_ray"]), stored * PHOTON_BYTES,
                 stored_all * PHOTON_BUILD_BYTES + min(W, 1 + emitted // 131072)
                 * PHOTON_CHUNK_BYTES, emitted=int(emitted), photon_rays=rays, stored=stored)
         if plan["radiance_estimates"]:
