@@ -85,7 +85,7 @@ def test_manifest_follows_the_strict_rules():
     assert len(tagline) <= 64 and tagline[-1].isalnum()
     assert manifest["license"] == ["SPDX:GPL-3.0-or-later"]
     assert manifest["blender_version_min"] == "4.2.0"
-    assert manifest["blender_version_max"] == "5.1.0"      # Python 3.11 wheels: 4.2 to 5.0
+    assert manifest["blender_version_max"] == "5.4.0"      # 4.2 to 5.3, the versions tested
     assert manifest["permissions"], "permissions must say why"
     for reason in manifest["permissions"].values():
         assert 0 < len(reason) <= 64 and reason[-1].isalnum()
@@ -94,10 +94,15 @@ def test_manifest_follows_the_strict_rules():
         assert pattern in excluded
     assert manifest["platforms"] == ["linux-x64", "windows-x64", "macos-arm64", "macos-x64"]
     pins = be.pinned_versions(ROOT / "pyproject.toml")
+    assert pins["embreex"] == "4.4.0.post1" and pins["pykdtree"] == "1.4.3"
+    assert "numpy" not in pins                            # one pin per Python: markers
     wheels = be.manifest_wheels(manifest, pins)           # raises on any inconsistency
     assert {w.name for w in wheels} == {"embreex", "pykdtree"}
-    assert {w.python for w in wheels} == {"cp311"}
-    assert sorted(w.platform for w in wheels) == sorted(2 * manifest["platforms"])
+    # Both Pythons in every platform's zip: 3.11 (Blender 4.2 to 5.0), 3.13 (5.1 to 5.3).
+    assert {w.python for w in wheels} == {"cp311", "cp313"}
+    assert be.pythons_of_range(manifest) == {"3.11": ["4.2", "4.3", "4.4", "4.5", "5.0"],
+                                             "3.13": ["5.1", "5.2", "5.3"]}
+    assert sorted(w.platform for w in wheels) == sorted(4 * manifest["platforms"])
     assert "numpy" not in {w.name for w in wheels}         # Blender ships numpy
 
 
@@ -125,6 +130,17 @@ def test_build_tool_refuses_bad_manifests_with_a_message():
         (_manifest(wheels=wheels + ["wheels/x.whl"]), "./wheels/<file>.whl"),
         (_manifest(platforms=["linux-x64", "amiga-68k"]), "unknown platform(s) 'amiga-68k'"),
         (_manifest(platforms=["linux-x64"]), "which 'platforms' does not list"),
+        # The Pythons follow the version range: each admitted Blender's, and no other.
+        (_manifest(wheels=[w for w in wheels if "cp313" not in w]),
+         "no cp313 wheels, but the version range admits Blender 5.1, 5.2, 5.3"),
+        (_manifest(blender_version_max="5.1.0"),
+         "cp313 wheels, but no Blender the version range admits runs Python 3.13"),
+        (_manifest(blender_version_min="5.1.0"),
+         "cp311 wheels, but no Blender the version range admits runs Python 3.11"),
+        (_manifest(blender_version_max="five"), "blender_version_max must be a version"),
+        # numpy is pinned per Python (an environment marker): never bundled.
+        (_manifest(wheels=wheels + ["./wheels/numpy-2.5.5-cp313-cp313-win_amd64.whl"]),
+         "numpy is not a pinned dependency (name==version, without an environment marker)"),
     ]
     for manifest, expected in cases:
         with pytest.raises(be.BuildError) as info:
@@ -179,12 +195,14 @@ def test_linux_zip_is_valid_and_holds_the_addon_and_its_wheels(linux_zip):
         assert not [n for n in names if "__pycache__" in n or n.endswith(".pyc")]
         wheels = sorted(n for n in names if n.startswith("wheels/"))
         assert wheels == sorted(f"wheels/{w}" for w in linux_zip["wheels"])
-        assert [w.split("-")[0] for w in wheels] == ["wheels/embreex", "wheels/pykdtree"]
+        assert [tuple(w.split("-")[i] for i in (0, 2)) for w in wheels] == [
+            ("wheels/embreex", "cp311"), ("wheels/embreex", "cp313"),
+            ("wheels/pykdtree", "cp311"), ("wheels/pykdtree", "cp313")]
         for name in wheels:                   # unmodified: byte for byte the downloaded file
             assert zf.read(name) == (be.DEFAULT_WHEELS / name.split("/", 1)[1]).read_bytes()
         manifest = tomllib.loads(zf.read("blender_manifest.toml").decode())
     assert manifest["build"]["generated"]["platforms"] == ["linux-x64"]
-    assert manifest["build"]["generated"]["wheels"] == [f"./{w}" for w in wheels]
+    assert sorted(manifest["build"]["generated"]["wheels"]) == [f"./{w}" for w in wheels]
 
 
 def _absolute_lanterna_imports(source: str, filename: str) -> list[str]:
@@ -239,6 +257,17 @@ def test_install_enable_render_disable_remove(linux_zip, scene1_blend, tmp_path)
     for module in ("embreex", "pykdtree"):
         assert r["modules_from"][module].startswith(r["ext_site_packages"]), r["modules_from"]
     assert r["bundled_modules_used"] == ["embreex", "pykdtree"]
+    # One zip for every Python: Blender extracted only its own Python's wheels of the two.
+    tag = "cp%d%d" % sys.version_info[:2]
+    assert sum(tag in w for w in linux_zip["wheels"]) == 2 < len(linux_zip["wheels"])
+    assert sorted(r["wheels_extracted"]) == ["embreex-4.4.0.post1", "pykdtree-1.4.3"]
+    assert all(t.startswith(f"{tag}-{tag}-") for tags in r["wheels_extracted"].values()
+               for t in tags), r["wheels_extracted"]
+    ext_modules = [f for f in r["extension_modules_extracted"] if "cpython-" in f]
+    assert ext_modules and all(f"cpython-{tag[2:]}" in f for f in ext_modules), ext_modules
+    # The add-on's own modules touched no deprecated Blender API (Light/World/Material.use_nodes
+    # in 5.x ...): every DeprecationWarning attributed to them, through install and render.
+    assert r["deprecations_from_addon"] == []
     assert r["hidden_imports_attempted"] == []     # no OpenEXR, Pillow, scipy, dev lanterna
     assert r["modules_of_addon"] and all(m.startswith(PACKAGE) for m in r["modules_of_addon"])
 
@@ -378,6 +407,22 @@ def _session(zip_path: str, blend: str, out: str) -> None:
 
     sys.meta_path.insert(0, OnlyBundled())
 
+    # Every DeprecationWarning attributed to the add-on's own modules, recorded (Blender's own
+    # warnings pass as usual).
+    import warnings
+
+    deprecations = []
+    show = warnings.showwarning
+
+    def record(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, DeprecationWarning) and "lanterna" in filename:
+            deprecations.append(f"{filename}:{lineno}: {message}")
+        return show(message, category, filename, lineno, file, line)
+
+    warnings.showwarning = record
+    warnings.filterwarnings("always", category=DeprecationWarning,
+                            module=PACKAGE.replace(".", r"\."))
+
     import bpy
 
     r = {"blender": bpy.app.version_string}
@@ -414,6 +459,13 @@ def _session(zip_path: str, blend: str, out: str) -> None:
     lscene = export.export_scene(bpy.context.evaluated_depsgraph_get(), resolution=(160, 120))
     np.save(os.path.join(out, "pipeline.npy"),
             pipeline.render(lscene, export.export_settings(scene)).image)
+    r["wheels_extracted"] = {      # each extracted wheel's tags, from its .dist-info/WHEEL
+        p.name[:-len(".dist-info")]: [line.split(":", 1)[1].strip() for line in
+                                      (p / "WHEEL").read_text().splitlines()
+                                      if line.startswith("Tag:")]
+        for p in Path(ext_site).glob("*.dist-info")}
+    r["extension_modules_extracted"] = sorted(
+        str(p.relative_to(ext_site)) for p in Path(ext_site).rglob("*") if p.suffix in (".so", ".pyd"))
     r["modules_from"] = {m: getattr(sys.modules.get(m), "__file__", None)
                          for m in ("embreex", "pykdtree")}
     r["bundled_modules_used"] = sorted({m.split(".")[0] for m, mod in list(sys.modules.items())
@@ -436,6 +488,7 @@ def _session(zip_path: str, blend: str, out: str) -> None:
         p.name for p in Path(ext_site).glob("*") if p.name.split("-")[0].split(".")[0]
         in ("embreex", "pykdtree")) if os.path.isdir(ext_site) else []
     r["hidden_imports_attempted"] = sorted(set(attempted))
+    r["deprecations_from_addon"] = deprecations
     Path(out, "session.json").write_text(json.dumps(r, indent=1))
 
 

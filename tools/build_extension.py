@@ -7,9 +7,12 @@
 What it does (``make extension`` runs it with the defaults):
 
 1. Reads ``blender_manifest.toml``: its ``wheels`` (the exact wheel files the extension bundles,
-   ``./wheels/<file>.whl``) and ``platforms``. Every wheel must be a pinned dependency of
-   ``pyproject.toml`` at the pinned version, and every platform must have a wheel of every
-   bundled dependency; anything else is refused with a message saying what to change.
+   ``./wheels/<file>.whl``), ``platforms`` and Blender version range. Every wheel must be a
+   dependency of ``pyproject.toml`` pinned to one version for every Python (``name==version``
+   without an environment marker) at that version; every platform must have a wheel of every
+   bundled dependency for every Python; and the Pythons must be those of the Blender series
+   the range admits (``BLENDER_PYTHON``: 3.11 for 4.2 to 5.0, 3.13 for 5.1 to 5.3), no more,
+   no fewer. Anything else is refused with a message saying what to change.
 2. Downloads each wheel of the chosen platforms, unmodified, from the package index with
    ``pip download --only-binary=:all: --no-deps`` into ``build/wheels`` (reused when there:
    download once, build offline afterwards). Each wheel's own ``RECORD`` hashes are checked.
@@ -22,6 +25,27 @@ What it does (``make extension`` runs it with the defaults):
 
 Exit code 0 on success; 2 with one message on stderr for a bad argument, manifest, download or
 a failed build or validation.
+
+One zip per platform, carrying the wheels of every Python (cp311 and cp313), not one zip per
+platform and Python: that is what Blender's extension code supports and expects (read in bpy
+4.2.23 and 5.2.3, ``addons_core/bl_pkg``):
+
+* ``blender_ext.py build --split-platforms`` splits by platform only: each zip gets "the wheels
+  compatible with the platform" (``build_paths_filter_by_platform`` ->
+  ``paths_filter_wheels_by_platform``, a test of the wheel's platform tag alone), so both
+  Pythons' wheels of a platform go into its zip, and ``[build.generated] wheels`` lists them.
+  There is no option to split by Python; a zip per Python would need two manifests and names
+  of our own for zips the tool names ``<id>-<version>-<platform>.zip``.
+* Installing and enabling, Blender takes the package's Python versions from its wheels
+  (``python_versions_from_wheels``: {3.11, 3.13} here) and refuses the package only when its
+  own Python is none of them (``repository_filter_skip``); then
+  ``_extensions_wheel_filter_for_this_system`` keeps the wheels whose platform tag matches and
+  whose Python tag is the running one ("Skipping wheel for other Python version"), and only
+  those are extracted into ``extensions/.local/lib/python3.X/site-packages``.
+
+So a user picks a zip by platform alone, as before, and an extension carried over from
+Blender 5.0 (3.11) to 5.1+ (3.13) keeps working: Blender extracts the other Python's wheels
+from the same package. The price is size: each zip carries two copies of the two wheels.
 """
 from __future__ import annotations
 
@@ -51,6 +75,14 @@ DEFAULT_STAGE = ROOT / "build" / "extension"
 # Folders never copied into the staging tree (build output and environments); the manifest's
 # [build] section then decides what of the rest goes into the zip.
 _SKIP_DIRS = {"build", "dist", "out", "__pycache__", "wheels"}
+
+# The Python of each Blender series (the Python that series' bpy wheel is built for), from 4.2,
+# the first with extensions. Bundled wheels must cover exactly the Pythons of the series that
+# the manifest's [blender_version_min, blender_version_max) admits.
+BLENDER_PYTHON = {
+    (4, 2): "3.11", (4, 3): "3.11", (4, 4): "3.11", (4, 5): "3.11", (5, 0): "3.11",
+    (5, 1): "3.13", (5, 2): "3.13", (5, 3): "3.13",
+}
 
 _WHEEL_RE = re.compile(r"^(?P<name>[^-]+)-(?P<version>[^-]+)(?:-(?P<build>\d[^-]*))?"
                        r"-(?P<python>[^-]+)-(?P<abi>[^-]+)-(?P<platform>[^-]+)\.whl$")
@@ -115,14 +147,37 @@ def parse_wheel(path: str) -> Wheel:
 
 
 def pinned_versions(pyproject: Path) -> dict[str, str]:
-    """``{normalised name: version}`` for the ``name==version`` pins of ``[project]``."""
+    """``{normalised name: version}`` for the ``name==version`` pins of ``[project]`` that hold
+    for every Python. A pin with an environment marker (``numpy==2.5.5; python_version >=
+    '3.13'``) differs between Pythons and is left out: a bundled wheel's dependency must be one
+    version everywhere, so that every Blender runs the same code."""
     data = tomllib.loads(pyproject.read_text(encoding="utf-8"))
     pins = {}
     for req in data.get("project", {}).get("dependencies", []):
-        m = re.fullmatch(r"\s*([A-Za-z0-9_.\-]+)\s*==\s*([^\s;,]+)\s*", req)
-        if m:
+        m = re.fullmatch(r"\s*([A-Za-z0-9_.\-]+)\s*==\s*([^\s;,]+)\s*(;.*)?", req)
+        if m and not m.group(3):
             pins[normalise(m.group(1))] = m.group(2)
     return pins
+
+
+def _version(text, what: str) -> tuple[int, ...]:
+    if not isinstance(text, str) or not re.fullmatch(r"\d+(\.\d+){1,2}", text):
+        raise BuildError(f"{MANIFEST}: {what} must be a version like \"4.2.0\", found {text!r}")
+    return tuple(int(x) for x in text.split("."))
+
+
+def pythons_of_range(manifest: dict) -> dict[str, list[str]]:
+    """``{python: [Blender series]}`` for the known series the manifest's version range admits
+    (``blender_version_max`` excluded, as Blender excludes it)."""
+    low = _version(manifest.get("blender_version_min"), "blender_version_min")
+    high = manifest.get("blender_version_max")
+    high = _version(high, "blender_version_max") if high is not None else None
+    pythons: dict[str, list[str]] = {}
+    for series, python in BLENDER_PYTHON.items():
+        if (series + (99,)) < low or (high is not None and series + (0,) >= high):
+            continue
+        pythons.setdefault(python, []).append("%d.%d" % series)
+    return pythons
 
 
 def load_manifest(root: Path = ROOT) -> tuple[dict, str]:
@@ -154,7 +209,7 @@ def manifest_wheels(manifest: dict, pins: dict[str, str]) -> list[Wheel]:
         pin = pins.get(w.name)
         if pin is None:
             raise BuildError(f"{MANIFEST}: {w.filename}: {w.name} is not a pinned dependency "
-                             "(name==version) in pyproject.toml")
+                             "(name==version, without an environment marker) in pyproject.toml")
         if pin != w.version:
             raise BuildError(f"{MANIFEST}: {w.filename} is {w.name} {w.version} but "
                              f"pyproject.toml pins {pin}; list the {pin} wheels or change the pin")
@@ -168,6 +223,16 @@ def manifest_wheels(manifest: dict, pins: dict[str, str]) -> list[Wheel]:
                              "does not list")
     names = sorted({w.name for w in wheels})
     pythons = sorted({w.python for w in wheels})
+    needed = pythons_of_range(manifest)
+    have = {w.python_version for w in wheels}
+    for python, series in needed.items():
+        if python not in have:
+            raise BuildError(f"{MANIFEST}: no cp{python.replace('.', '')} wheels, but the "
+                             f"version range admits Blender {', '.join(series)} (Python "
+                             f"{python}); add them or narrow the range")
+    for python in sorted(have - set(needed)):
+        raise BuildError(f"{MANIFEST}: cp{python.replace('.', '')} wheels, but no Blender the "
+                         f"version range admits runs Python {python}; drop them")
     for platform in platforms:
         for name in names:
             for python in pythons:
