@@ -506,6 +506,142 @@ def test_light_conversion():
     assert any("'Disk'" in w and "Spread 90" in w for w in s.warnings)
 
 
+def light_emission_node(light):
+    """The Emission node of a light's tree (Blender 5.1+: always there; before: made by Use
+    Nodes, which compat.ensure_node_tree switches on)."""
+    return next(n for n in compat.ensure_node_tree(light).nodes if n.type == "EMISSION")
+
+
+def test_light_node_tree_read_as_cycles_reads_it():
+    scene = reset()
+    add_camera(scene)
+    plain, _ = add_light(scene, "Plain", "POINT")          # the default tree (or none)
+    plain.energy, plain.shadow_soft_size = 100.0, 0.0
+    default, _ = add_light(scene, "Default", "POINT")      # the default tree, switched on
+    default.energy, default.shadow_soft_size = 100.0, 0.0
+    light_emission_node(default)
+    strong, _ = add_light(scene, "Strong", "POINT")        # Emission strength 2, a colour
+    strong.energy, strong.shadow_soft_size = 100.0, 0.0
+    strong.color = (1.0, 0.8, 0.5)
+    em = light_emission_node(strong)
+    em.inputs["Strength"].default_value = 2.0
+    em.inputs["Color"].default_value = (1.0, 0.5, 0.25, 1.0)
+    area, _ = add_light(scene, "Panel", "AREA", location=(0, 0, 2))
+    area.energy = 10.0
+    em = light_emission_node(area)                          # a constant RGB node: its value
+    rgb = area.node_tree.nodes.new("ShaderNodeRGB")
+    rgb.outputs[0].default_value = (0.5, 0.5, 1.0, 1.0)
+    area.node_tree.links.new(rgb.outputs[0], em.inputs["Color"])
+
+    s = export()
+    lights = {l.name: l for l in s.lights}
+    np.testing.assert_allclose(lights["Plain"].flux, 100.0, rtol=1e-6)
+    np.testing.assert_allclose(lights["Default"].flux, 100.0, rtol=1e-6)
+    # Twice the power, in the node's colour times the light's.
+    np.testing.assert_allclose(lights["Strong"].flux, [200.0, 80.0, 25.0], rtol=1e-6)
+    np.testing.assert_allclose(lights["Panel"].power, [5.0, 5.0, 10.0], rtol=1e-6)
+    assert [w for w in s.warnings if w.startswith("Light ")] == []      # all read exactly
+
+    # Anything else warns, naming the light and the node.
+    bb = strong.node_tree.nodes.new("ShaderNodeBlackbody")
+    strong.node_tree.links.new(bb.outputs[0], light_emission_node(strong).inputs["Color"])
+    diffuse = default.node_tree.nodes.new("ShaderNodeBsdfDiffuse")
+    out = next(n for n in default.node_tree.nodes if n.type == "OUTPUT_LIGHT")
+    default.node_tree.links.new(diffuse.outputs[0], out.inputs["Surface"])
+    s = export()
+    lights = {l.name: l for l in s.lights}
+    light_warnings = [w for w in s.warnings if w.startswith("Light ")]
+    assert len(light_warnings) == 2, light_warnings
+    assert any("Light 'Strong'" in w and "Blackbody" in w and "'Emission'" in w
+               for w in light_warnings), light_warnings
+    assert any("Light 'Default'" in w and "Diffuse BSDF node 'Diffuse BSDF'" in w
+               for w in light_warnings), light_warnings
+    np.testing.assert_allclose(lights["Strong"].flux, [200.0, 80.0, 25.0], rtol=1e-6)
+    np.testing.assert_allclose(lights["Default"].flux, 100.0, rtol=1e-6)   # Color x Power
+
+    # Nothing at the Light Output: Cycles gives the light no emission; so does the export.
+    for link in list(default.node_tree.links):
+        if link.to_node == out:
+            default.node_tree.links.remove(link)
+    s = export()
+    assert "Default" not in {l.name for l in s.lights}
+    assert any("Light 'Default'" in w and "the light is dark" in w for w in s.warnings)
+
+
+def test_light_node_tree_off_where_use_nodes_still_counts():
+    """Blender 4.2 to 5.0: a light's tree counts only with Use Nodes on (5.1+: always)."""
+    scene = reset()
+    add_camera(scene)
+    light, _ = add_light(scene, "Lamp", "POINT")
+    light.energy, light.shadow_soft_size = 100.0, 0.0
+    light_emission_node(light).inputs["Strength"].default_value = 3.0
+    np.testing.assert_allclose(export().lights[0].flux, 300.0, rtol=1e-6)
+    if compat.nodes_always_on(light):
+        pytest.skip(f"Blender {bpy.app.version_string}: light nodes are always on")
+    light.use_nodes = False
+    np.testing.assert_allclose(export().lights[0].flux, 100.0, rtol=1e-6)
+
+
+def test_no_deprecated_blender_api_from_lanterna():
+    """Under a Blender that deprecates ``use_nodes`` (materials and worlds from 5.0, lights from
+    5.1), exporting lights, a world and materials, and making node trees, warns nothing from
+    Lanterna's own modules; reading ``use_nodes`` there would (the control below)."""
+    import warnings
+
+    import lanterna
+
+    scene = reset()
+    add_camera(scene)
+    for kind in ("POINT", "SPOT", "SUN", "AREA"):
+        light, _ = add_light(scene, kind.title(), kind, location=(0, 0, 3))
+        light.energy = 10.0
+    world = bpy.data.worlds.new("World")
+    compat.ensure_node_tree(world)
+    scene.world = world
+    add_cube(scene)
+    mat = new_material("Painted")
+    bpy.context.object.data.materials.append(mat)
+    plain = bpy.data.materials.new("Plain")
+    own = os.path.dirname(lanterna.__file__)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        s = export()
+        for block in (mat, plain, world, *bpy.data.lights):
+            compat.ensure_node_tree(block)
+            compat.uses_nodes(block)
+        compat.nodes_always_on(bpy.data.lights[0])
+        from lanterna.engine.blender.export import material_from_nodes
+        material_from_nodes(plain)
+    assert len(s.lights) == 4 and not s.world.is_black
+    ours = [f"{w.filename}:{w.lineno}: {w.message}" for w in caught
+            if issubclass(w.category, DeprecationWarning) and w.filename.startswith(own)
+            and not w.filename.startswith(os.path.join(own, "tests"))]
+    assert ours == []
+    # Control: the deprecated property itself warns where Blender deprecates it.
+    light = bpy.data.lights[0]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        light.use_nodes
+    deprecated = [w for w in caught if issubclass(w.category, DeprecationWarning)]
+    assert bool(deprecated) == compat.nodes_always_on(light)
+
+
+def test_deprecation_warnings_of_lanterna_fail_the_suite_and_blenders_do_not():
+    """pyproject's filterwarnings: a DeprecationWarning from Lanterna's modules is an error in
+    every test, one from Blender's own modules (or a test's) is not."""
+    import warnings
+
+    with pytest.raises(DeprecationWarning):
+        warnings.warn_explicit("old API", DeprecationWarning, "export.py", 1,
+                               module="lanterna.engine.blender.export")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.warn_explicit("old API", DeprecationWarning, "bpy_types.py", 1,
+                               module="bpy_types")
+        warnings.warn_explicit("old API", DeprecationWarning, "addon_utils.py", 1,
+                               module="addon_utils")
+    assert len(caught) == 2
+
+
 def test_world_colour():
     scene = reset()
     add_camera(scene)

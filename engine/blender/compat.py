@@ -1,13 +1,20 @@
-"""What differs between the Blender versions Lanterna supports (4.2 LTS, 4.5 LTS and 5.0), in one
-place. Everything else in Lanterna uses an API that is the same in all three.
+"""What differs between the Blender versions Lanterna supports (4.2 LTS, 4.5 LTS, 5.0, 5.1, 5.2 LTS
+and 5.3), in one place. Everything else in Lanterna uses an API that is the same in all of them.
 
 ``bpy`` is imported lazily, so that this module loads without Blender (and, having no imports of
 its own package, also on its own by file path, as the extension test does).
 
-* ``ensure_node_tree(id_block)`` / ``uses_nodes(id_block)``: a new material or world has a node
-  tree from 5.0 on and always renders through it (``use_nodes`` is deprecated there); in 4.2
-  and 4.5 nodes are opt-in (``use_nodes = True`` creates the tree) and a block with
-  ``use_nodes`` off renders with its viewport colour.
+* ``ensure_node_tree(id_block)`` / ``node_tree_in_use(id_block)`` / ``uses_nodes(id_block)``:
+  which node tree a material, world or light renders through. Materials and worlds have a node
+  tree from 5.0 on and always render through it; lights do so from 5.1 on (5.2 gives every
+  light a tree with one Emission node, strength 1, white, and ignores ``use_nodes = False``).
+  There ``use_nodes`` is deprecated, to be removed in 6.0, and reading it warns
+  (``DeprecationWarning: 'Material.use_nodes' is expected to be removed in Blender 6.0``;
+  ``Light.use_nodes`` likewise). Before, nodes are opt-in: ``use_nodes = True`` creates the
+  tree, and a block with ``use_nodes`` off renders without it (a material or world with its
+  viewport colour, a light with Color x Power). Which case applies is read from Blender's own
+  description of the property (``bl_rna``: deprecated or gone means always on), not from
+  version numbers, so ``use_nodes`` is read only where it still means something.
 * ``light_exposure(light)`` / ``light_normalized(light)``: ``Light.exposure`` (power x
   2^exposure) and ``Light.normalize`` (off: power per square metre of an area light) came after
   4.2; there every light has exposure 0 and is normalized.
@@ -31,9 +38,9 @@ import os
 import shutil
 import sys
 
-__all__ = ["blender_version", "ensure_node_tree", "uses_nodes", "light_exposure",
-           "light_normalized", "eevee_engine_id", "multilayer_exr", "module_exit_is_unsafe",
-           "exit_process"]
+__all__ = ["blender_version", "nodes_always_on", "ensure_node_tree", "node_tree_in_use",
+           "uses_nodes", "light_exposure", "light_normalized", "eevee_engine_id",
+           "multilayer_exr", "module_exit_is_unsafe", "exit_process"]
 
 
 def blender_version() -> tuple[int, int, int]:
@@ -42,20 +49,35 @@ def blender_version() -> tuple[int, int, int]:
     return tuple(bpy.app.version)
 
 
+def nodes_always_on(id_block) -> bool:
+    """Whether ``id_block`` (a material, world or light) always renders through its node tree:
+    its ``use_nodes`` is deprecated (materials and worlds from 5.0, lights from 5.1) or gone
+    (6.0). Read from the RNA description, which does not warn as reading ``use_nodes`` does."""
+    prop = type(id_block).bl_rna.properties.get("use_nodes")
+    return prop is None or bool(getattr(prop, "is_deprecated", False))
+
+
 def ensure_node_tree(id_block):
-    """The node tree of a material or world, switched on first where nodes are opt-in."""
-    if id_block.node_tree is None:                      # 4.2, 4.5
+    """The node tree of a material, world or light, switched on first where nodes are opt-in."""
+    if id_block.node_tree is None and not nodes_always_on(id_block):     # 4.2, 4.5
         id_block.use_nodes = True
     return id_block.node_tree
 
 
+def node_tree_in_use(id_block):
+    """The node tree a material, world or light renders through, or None when it renders
+    without one (no tree, or ``use_nodes`` off where nodes are still opt-in)."""
+    tree = id_block.node_tree
+    if tree is None:
+        return None
+    if nodes_always_on(id_block):
+        return tree
+    return tree if id_block.use_nodes else None
+
+
 def uses_nodes(id_block) -> bool:
-    """Whether a material or world renders through its node tree."""
-    if id_block.node_tree is None:
-        return False
-    if blender_version() >= (5, 0, 0):                  # use_nodes: deprecated, always on
-        return True
-    return bool(id_block.use_nodes)
+    """Whether a material, world or light renders through its node tree."""
+    return node_tree_in_use(id_block) is not None
 
 
 def light_exposure(light) -> float:

@@ -46,7 +46,7 @@ animation already applied by Blender) and turns it into the renderer's inert sce
   mesh lights from triangles whose material has ``exitance`` > 0 (``emit_both_sides`` True,
   as Cycles emits from both faces).
 * **Lights** (also instanced ones), colour = Color x (blackbody colour if Use Temperature)
-  x Power x 2^Exposure:
+  x Power x 2^Exposure (x the node tree's Emission Strength x Color):
 
   - Point: :class:`PointLight`, flux Phi = P x colour [W]. A radius (Radius / shadow_soft_size
     > 0) is ignored, with a warning: the light is a point.
@@ -57,8 +57,14 @@ animation already applied by Blender) and turns it into the renderer's inert sce
   - Area: :class:`AreaLight`, shape, world matrix, size_x = Size, size_y = Size Y [m], power =
     P x colour [W] (x world area [m^2] when Normalize is off); ``collimated`` when Spread
     < 1e-3 rad; other spreads below 180 deg are reported and treated as 180 deg.
-  - Zero power is skipped silently; negative power is skipped with a warning; light node trees
-    are reported (once per light) and ignored.
+  - A light's node tree (always there from Blender 5.1, switched on by Use Nodes before) is
+    read as Cycles reads it: the Emission node feeding the Light Output multiplies the power by
+    its Strength x Color (Blender's default tree, strength 1 and white, changes nothing); Add
+    and Mix shaders of emissions combine; an RGB or Value node feeding Color or Strength gives
+    its value; any other node (a texture, Blackbody, Light Falloff, another shader) is reported
+    by name, light and node, and its socket's own value (or 1) used. A tree with nothing at
+    the Light Output makes the light dark, as in Cycles, with a warning.
+  - Zero power is skipped silently; negative power is skipped with a warning.
   - ``Light.lanterna``: ``photon_share`` goes onto every light; ``shadow_photons`` onto area
     lights (the only ones shadow photons leave).
 * **World**: a uniform environment of radiance = Background Color x Strength
@@ -523,12 +529,58 @@ def material_from_nodes(mat, warn=None) -> Material:
 # ---------------------------------------------------------------------------------------------
 # Lights
 # ---------------------------------------------------------------------------------------------
+def _light_emission(reader: _NodeReader, src, depth: int = 0) -> np.ndarray:
+    """The colour factor of the shader feeding a Light Output, as Cycles reads it: an Emission
+    node's Color x Strength; Add and Mix shaders of emissions combined; anything else warned
+    about (naming the node) and taken as 1, i.e. Color x Power."""
+    node, out = src
+    t = node.type
+    if t == "EMISSION":
+        return (reader.colour(node, "Color", default=(1.0, 1.0, 1.0))
+                * reader.scalar(node, "Strength", default=1.0))
+    if t in ("MIX_SHADER", "ADD_SHADER") and depth < 64:
+        shaders = [s for s in node.inputs if s.type == "SHADER"]
+        parts = []
+        for sock in shaders[:2]:
+            sub = reader.source(sock)
+            parts.append(np.zeros(3) if sub is None else _light_emission(reader, sub, depth + 1))
+        if t == "ADD_SHADER":
+            return parts[0] + parts[1]
+        fac = float(np.clip(reader.scalar(node, "Fac", "Factor", default=0.5), 0, 1))
+        return (1 - fac) * parts[0] + fac * parts[1]
+    reader.warn(f"{reader.owner}: {node.bl_label} node '{node.name}' feeding the Light Output "
+                f"is not supported; using Color x Power")
+    return np.ones(3)
+
+
+def _light_node_factor(name: str, tree, warn: _Warnings) -> np.ndarray | None:
+    """What a light's node tree multiplies its Color x Power by (Cycles: the Emission node's
+    Strength and Color), or None when nothing reaches the Light Output's Surface: Cycles then
+    gives the light no emission, so it is dark (with a warning). Blender 5.2's default tree
+    (one Emission node, strength 1, white) gives 1 and no warning."""
+    reader = _NodeReader(f"Light '{name}'", warn)
+    out = _active_output(tree, "OUTPUT_LIGHT")
+    src = None if out is None else reader.source(out.inputs.get("Surface"))
+    if src is None:
+        what = "has no Light Output node" if out is None else \
+            "has nothing connected to the Light Output's Surface"
+        warn(f"Light '{name}': its node tree {what}; the light is dark (as in Cycles)")
+        return None
+    return _light_emission(reader, src)
+
+
 def _convert_light(name: str, light, matrix: np.ndarray, warn: _Warnings):
     """A Blender light with its 4x4 world matrix -> a core light, or None (zero power)."""
     colour = np.array(light.color[:3], float)
     if getattr(light, "use_temperature", False):
         colour = colour * np.array(light.temperature_color[:3], float)
     power = colour * float(light.energy) * 2.0 ** compat.light_exposure(light)
+    tree = compat.node_tree_in_use(light)
+    if tree is not None:
+        factor = _light_node_factor(name, tree, warn)
+        if factor is None:
+            return None
+        power = power * factor
     if not np.all(np.isfinite(power)):
         raise SceneError(f"Light '{name}': power {_fmt(power)} is not finite")
     if np.all(power == 0):
@@ -539,8 +591,6 @@ def _convert_light(name: str, light, matrix: np.ndarray, warn: _Warnings):
     if not np.all(np.isfinite(matrix)):
         raise SceneError(f"Light '{name}': world matrix is not finite (NaN or infinite "
                          f"location, rotation or scale)")
-    if getattr(light, "use_nodes", False) and light.node_tree is not None:
-        warn(f"Light '{name}': light nodes are ignored; using Color x Power")
     normalize = compat.light_normalized(light)
     position = matrix[:3, 3]
     down = -matrix[:3, 2]          # the light's local -Z in world space
