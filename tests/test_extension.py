@@ -84,8 +84,10 @@ def test_manifest_follows_the_strict_rules():
     tagline = manifest["tagline"]
     assert len(tagline) <= 64 and tagline[-1].isalnum()
     assert manifest["license"] == ["SPDX:GPL-3.0-or-later"]
-    assert manifest["blender_version_min"] == "4.2.0"
-    assert manifest["blender_version_max"] == "5.4.0"      # 4.2 to 5.3, the versions tested
+    # 4.2.13 to 5.3: the versions tested; 4.2.0 would install the cp313 wheels (see
+    # tools/build_extension.py, MULTI_PYTHON_MIN).
+    assert manifest["blender_version_min"] == "4.2.13"
+    assert manifest["blender_version_max"] == "5.4.0"
     assert manifest["permissions"], "permissions must say why"
     for reason in manifest["permissions"].values():
         assert 0 < len(reason) <= 64 and reason[-1].isalnum()
@@ -138,6 +140,8 @@ def test_build_tool_refuses_bad_manifests_with_a_message():
         (_manifest(blender_version_min="5.1.0"),
          "cp311 wheels, but no Blender the version range admits runs Python 3.11"),
         (_manifest(blender_version_max="five"), "blender_version_max must be a version"),
+        (_manifest(blender_version_min="4.2.0"),
+         "wheels for Python 3.11 and 3.13 in one zip need blender_version_min >= 4.2.13"),
         # numpy is pinned per Python (an environment marker): never bundled.
         (_manifest(wheels=wheels + ["./wheels/numpy-2.5.5-cp313-cp313-win_amd64.whl"]),
          "numpy is not a pinned dependency (name==version, without an environment marker)"),

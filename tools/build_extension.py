@@ -46,6 +46,19 @@ platform and Python: that is what Blender's extension code supports and expects 
 So a user picks a zip by platform alone, as before, and an extension carried over from
 Blender 5.0 (3.11) to 5.1+ (3.13) keeps working: Blender extracts the other Python's wheels
 from the same package. The price is size: each zip carries two copies of the two wheels.
+
+The Python filter is not in Blender 4.2.0: its ``_extensions_wheel_filter_for_platform``
+reads the platform tag only (``_python_tag, _abi_tag, platform_tag = ...``), and
+``wheel_list_deduplicate_as_skip_set`` then keeps one wheel per distribution, the same
+version broken by the larger file name, i.e. the cp313 wheel, which Python 3.11 cannot
+import. bpy 4.2.13 (the next 4.2 on the package index; Blender added the filter with "Support
+multiple extensions with different Python versions", ref #128750, and backported it to 4.2
+LTS) has it, as have 4.2.23, 4.5, 5.0 and later. So a manifest bundling more than one Python
+must say ``blender_version_min >= MULTI_PYTHON_MIN`` (4.2.13). Tried with bpy 4.2.0: a zip
+of both Pythons with a minimum of 4.2.0 installs and enables, with the cp313 embreex and
+pykdtree extracted into ``python3.11/site-packages`` (``import embreex.rtcore_scene``:
+ModuleNotFoundError, so the first render fails); with 4.2.13 Blender 4.2.0 refuses it at once:
+"This Blender version (4.2.0) doesn't meet the minimum supported version (4.2.13)".
 """
 from __future__ import annotations
 
@@ -83,6 +96,11 @@ BLENDER_PYTHON = {
     (4, 2): "3.11", (4, 3): "3.11", (4, 4): "3.11", (4, 5): "3.11", (5, 0): "3.11",
     (5, 1): "3.13", (5, 2): "3.13", (5, 3): "3.13",
 }
+
+# The first Blender known to install only its own Python's wheels of a package that bundles
+# several (see the module docstring): bpy 4.2.13 has the filter, 4.2.0 does not, and no 4.2
+# between them is on the package index.
+MULTI_PYTHON_MIN = (4, 2, 13)
 
 _WHEEL_RE = re.compile(r"^(?P<name>[^-]+)-(?P<version>[^-]+)(?:-(?P<build>\d[^-]*))?"
                        r"-(?P<python>[^-]+)-(?P<abi>[^-]+)-(?P<platform>[^-]+)\.whl$")
@@ -230,6 +248,12 @@ def manifest_wheels(manifest: dict, pins: dict[str, str]) -> list[Wheel]:
             raise BuildError(f"{MANIFEST}: no cp{python.replace('.', '')} wheels, but the "
                              f"version range admits Blender {', '.join(series)} (Python "
                              f"{python}); add them or narrow the range")
+    low = _version(manifest.get("blender_version_min"), "blender_version_min")
+    if len(have) > 1 and low < MULTI_PYTHON_MIN:
+        least = ".".join(map(str, MULTI_PYTHON_MIN))
+        raise BuildError(f"{MANIFEST}: wheels for Python {' and '.join(sorted(have))} in one zip "
+                         f"need blender_version_min >= {least}: older Blender extracts wheels "
+                         "of every Python (the cp313 one wins and does not import on 3.11)")
     for python in sorted(have - set(needed)):
         raise BuildError(f"{MANIFEST}: cp{python.replace('.', '')} wheels, but no Blender the "
                          f"version range admits runs Python {python}; drop them")
