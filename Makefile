@@ -9,7 +9,8 @@
 # $(pyenv root)/versions/3.X.*/bin/python3.X.
 find_python = $(shell for c in python$(1) $$(pyenv root 2>/dev/null)/versions/$(1).*/bin/python$(1) \
                 $$HOME/.pyenv/versions/$(1).*/bin/python$(1) /usr/local/bin/python$(1) \
-                /usr/bin/python$(1); do "$$c" -c 'import sys; assert "%d.%d" % sys.version_info[:2] == "$(1)"' \
+                /usr/bin/python$(1); do \
+                "$$c" -c 'import sys; assert "%d.%d" % sys.version_info[:2] == "$(1)"' \
                 >/dev/null 2>&1 && { command -v "$$c"; break; }; done)
 ifndef PYTHON313
 PYTHON313 := $(call find_python,3.13)

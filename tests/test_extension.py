@@ -469,7 +469,8 @@ def _session(zip_path: str, blend: str, out: str) -> None:
                                       if line.startswith("Tag:")]
         for p in Path(ext_site).glob("*.dist-info")}
     r["extension_modules_extracted"] = sorted(
-        str(p.relative_to(ext_site)) for p in Path(ext_site).rglob("*") if p.suffix in (".so", ".pyd"))
+        str(p.relative_to(ext_site)) for p in Path(ext_site).rglob("*")
+        if p.suffix in (".so", ".pyd"))
     r["modules_from"] = {m: getattr(sys.modules.get(m), "__file__", None)
                          for m in ("embreex", "pykdtree")}
     r["bundled_modules_used"] = sorted({m.split(".")[0] for m, mod in list(sys.modules.items())
