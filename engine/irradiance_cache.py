@@ -818,4 +818,6 @@ class IrradianceCache:
         }
 
     def reset_usage(self):
+        """Zero every record's usage counter (a render that reuses baked records counts its
+        own use)."""
         self._used[:] = 0

@@ -187,7 +187,7 @@ def _cache(prep: Prepared, scene, settings, gather, lookups, tell, cancelled, ar
     reused = artifacts is not None and artifacts.cache is not None
     if reused:
         cache = artifacts.cache
-        cache.usage[:] = 0
+        cache.reset_usage()
         cache_stats = {"records": len(cache), "passes": []}
     else:
         cache, cache_stats = place_cache(scene, prep.accel, prep.surfaces, gather, settings,

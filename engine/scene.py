@@ -98,10 +98,6 @@ class Material:
         self.specular = _rgb(self.specular, self.name, "specular reflectance")
         self.exitance = _rgb(self.exitance, self.name, "radiant exitance")
 
-    @property
-    def is_emissive(self) -> bool:
-        return bool(np.any(self.exitance > 0))
-
 
 def _share(value, name: str) -> float:
     """A light's photon share: a finite weight >= 0 (1 = photons in proportion to flux)."""

@@ -217,10 +217,11 @@ def test_panels_poll_only_for_lanterna(registered):
 
 
 def test_energy_warning_channels():
-    from lanterna.ui.panels import overfull_channels
+    from lanterna.ui.panels import energy_message
 
-    assert overfull_channels((0.8, 0.5, 0.2), (0.3, 0.5, 0.9)) == ["R", "B"]
-    assert overfull_channels((0.8, 0.8, 0.8), (0.2, 0.0, 0.1)) == []
+    assert energy_message((0.8, 0.5, 0.2), (0.3, 0.5, 0.9)) == (
+        "ρd + ρs > 1 in R (1.100), B (1.100): creates energy; the render scales it down")
+    assert energy_message((0.8, 0.8, 0.8), (0.2, 0.0, 0.1)) == ""
 
 
 # -- Rendering --------------------------------------------------------------------------------

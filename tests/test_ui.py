@@ -405,9 +405,10 @@ def test_last_render_panels_show_the_plan_and_the_timings(registered):
 
 # -- Material ---------------------------------------------------------------------------------
 def test_rho_check_flags_exactly_the_channels_over_one():
-    assert panels.overfull_channels((0.8, 0.5, 0.2), (0.3, 0.5, 0.9)) == ["R", "B"]
-    assert panels.overfull_channels((0.8, 0.8, 0.8), (0.2, 0.0, 0.1)) == []
-    assert panels.overfull_channels((0.5, 0.5, 0.5), (0.5, 0.501, 0.4)) == ["G"]
+    over = lambda d, s: [c for c, _total in panels.channel_sums_over_one(d, s)]  # noqa: E731
+    assert over((0.8, 0.5, 0.2), (0.3, 0.5, 0.9)) == ["R", "B"]
+    assert over((0.8, 0.8, 0.8), (0.2, 0.0, 0.1)) == []
+    assert over((0.5, 0.5, 0.5), (0.5, 0.501, 0.4)) == ["G"]
     message = panels.energy_message((0.8, 0.5, 0.2), (0.3, 0.5, 0.9))
     assert "R (1.100)" in message and "B (1.100)" in message and "G (" not in message
     assert panels.energy_message((1.0, 0.0, 0.3), (0.0, 1.0, 0.7)) == ""

@@ -527,11 +527,6 @@ def channel_sums_over_one(diffuse, specular, tolerance: float = 1e-6) -> list[tu
             if float(d) + float(s) > 1.0 + tolerance]
 
 
-def overfull_channels(diffuse, specular) -> list[str]:
-    """Names of the channels where rho_d + rho_s exceeds 1 (energy would be created)."""
-    return [c for c, _total in channel_sums_over_one(diffuse, specular)]
-
-
 def energy_message(diffuse, specular) -> str:
     """The Radiometry panel's alert: the channels over 1 with their sums; '' when none."""
     over = channel_sums_over_one(diffuse, specular)
