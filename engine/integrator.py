@@ -14,7 +14,11 @@ What it computes
           ``photon-map`` mode: the photon map's estimate of all light;
         * at a mirror: the reflected ray goes on with throughput rho_s, up to
           ``max_specular_depth`` bounces.
-        Materials are read through ``bsdf`` (``SceneSurfaces.params``).
+        Materials are read through ``bsdf`` (``SceneSurfaces.params``). Pixels whose filter
+        may hold an emitter's edge (``emitter_edges``) take their camera-seen emission from
+        ``EDGE_SAMPLES_FACTOR`` x samples of their own (``edge_emission``): at 16 spp such a
+        pixel is otherwise decided by how many samples land on an emitter 100x brighter than
+        its surroundings.
 
 Blocks (``settings.camera_blocks``) are square parts of the full frame (64 x 64 pixels at
 16 spp), each with its own random stream from (seed, block number): they run on the thread
@@ -106,8 +110,9 @@ def render_camera(context: CameraContext, wanted_parts, pool, progress=None, can
             progress(out.done / max(len(blocks), 1), text)
 
     t0 = time.perf_counter()
-    context = replace(context, edges=emitter_edges(scene, context.accel, context.surfaces,
-                                                   settings.filter_width))
+    if not skip:
+        context = replace(context, edges=emitter_edges(scene, context.accel, context.surfaces,
+                                                       settings.filter_width))
     tell(f"{label}: 0/{len(blocks)} batches")
     pending = {}
     queue = [] if skip else list(reversed(blocks))
