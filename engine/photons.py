@@ -64,7 +64,10 @@ def column_bounds(points: np.ndarray):
 def morton_order(points: np.ndarray, lo=None, hi=None) -> np.ndarray:
     """Permutation that sorts ``points`` (N, 3) along a Z-order (Morton) curve of 1024^3
     cells over [lo, hi]. Photons stored in this order and queries asked in this order touch
-    memory that is close together: measured here 175k against 30k k=50 queries a second."""
+    memory that is close together: measured here 175k against 30k k=50 queries a second. The
+    sort is stable: photons sharing a cell keep their traced order, so the map (and the sums of
+    every estimate) are the same under numpy 1.26 and numpy 2, whose default sorts break such
+    ties differently (Blender 5.2 against 5.0 differed by 4.5 % in a 4 x 4 block of noise)."""
     p = np.asarray(points, np.float32)
     if len(p) == 0:
         return np.zeros(0, np.int64)
@@ -76,7 +79,7 @@ def morton_order(points: np.ndarray, lo=None, hi=None) -> np.ndarray:
     code = _spread_bits(cells[:, 0])
     code |= _spread_bits(cells[:, 1]) << 1
     code |= _spread_bits(cells[:, 2]) << 2
-    return np.argsort(code)
+    return np.argsort(code, kind="stable")     # ties in a cell keep their order, whatever numpy
 
 
 @dataclass
