@@ -49,9 +49,14 @@ def _throughput(threads: int) -> dict:
 
 def write(path: Path, sweeps: dict, throughput: dict, minutes: float) -> None:
     today = datetime.date.today().isoformat()
+    loads = [round(v, 1) for s in sweeps.values()
+             for v in (s["machine"].get("load_average_start") or [])[:1]
+             + (s["machine"].get("load_average_end") or [])[:1]]
+    load = f", load average {min(loads)}-{max(loads)} during the sweep" if loads else ""
     lines = ["# Performance", "",
              f"Measured {today} on {platform.machine()} ({platform.system()}, "
-             f"{throughput['scene1']['workers']} worker threads), {minutes:.0f} min. Regenerate "
+             f"{throughput['scene1']['workers']} worker threads{load}), {minutes:.0f} min. "
+             "Regenerate "
              "with `lanterna bench --performance` from a checkout (`bench/performance.py`). "
              "Benchmarks on a shared machine: each ratio is against a baseline measured in the "
              "same run.", "",
