@@ -23,7 +23,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.lanterna-installed
 
-.PHONY: render test bench clean scenes extension test-compat fuzz
+.PHONY: render test test-parity bench clean scenes extension test-compat fuzz
 
 # Blender versions the add-on is tested against besides .venv's 5.2.3 (make test-compat), each
 # in its own environment .venv-bpyXY with the Python that Blender ships; and the
@@ -67,7 +67,11 @@ render: $(STAMP)
 	$(VENV)/bin/lanterna render -o out/scene1.exr --png out/scene1.png --report out/scene1.json
 
 test: $(STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -m "not parity"
+
+# The whole-render parity suites against Cycles on the seed scenes (about 2 minutes); CI runs them.
+test-parity: $(STAMP)
+	$(PY) -m pytest -q -m parity
 
 # One installable zip per platform in dist/, built and validated by Blender's blender_ext.py.
 extension: $(STAMP)

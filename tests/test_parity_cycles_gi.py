@@ -79,6 +79,7 @@ def render_full(name, **settings):
     return [render(scene, RenderSettings(seed=seed, **settings)) for seed in SEEDS]
 
 
+@pytest.mark.parity
 @pytest.mark.parametrize("name", GI_SCENES)
 def test_full_mode_matches_cycles_with_all_bounces(name):
     results = render_full(name)
@@ -105,6 +106,7 @@ FINAL_REL_TOL = 0.03          # issue 4: the final preset within 3 %
 FINAL_MAX_NOISE = 0.0075      # so that 3 % is at least 4 sigma
 
 
+@pytest.mark.parity
 @pytest.mark.parametrize("name", FINAL_SCENES)
 def test_final_preset_matches_cycles_within_3_percent(name):
     """The seed's whole method (final gather over precomputed irradiance, irradiance cache
