@@ -92,6 +92,9 @@ class Material:
     specular: np.ndarray = field(default_factory=lambda: np.zeros(3))
     exitance: np.ndarray = field(default_factory=lambda: np.zeros(3))
     emit_both_sides: bool = True  # Cycles emits from both faces of an emissive mesh
+    # The Blender shader's weighted closures (``engine/shaders.py``), kept for the material
+    # system and the Material panel; the three properties above are what is rendered today.
+    closures: tuple = ()
 
     def __post_init__(self):
         self.diffuse = _rgb(self.diffuse, self.name, "diffuse reflectance")

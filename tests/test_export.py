@@ -239,6 +239,82 @@ def test_principled_material_values():
     assert np.all(s.material_ids == s.materials.index(m))
 
 
+# Every input of Blender 5.2's Principled BSDF and the closure parameter it lands in: set to a
+# value other than the default, each must arrive in the exported closure unchanged.
+PRINCIPLED_INPUTS = {
+    "Base Color": ("base_color", (0.5, 0.4, 0.3)), "Metallic": ("metallic", 0.3),
+    "Roughness": ("roughness", 0.7), "IOR": ("ior", 1.33), "Alpha": ("alpha", 0.9),
+    "Thin Wall": ("thin_wall", True), "Diffuse Roughness": ("diffuse_roughness", 0.4),
+    "Subsurface Weight": ("subsurface_weight", 0.2),
+    "Specular IOR Level": ("specular_ior_level", 0.8),
+    "Specular Tint": ("specular_tint", (0.9, 0.8, 0.7)), "Anisotropic": ("anisotropic", 0.6),
+    "Anisotropic Rotation": ("anisotropic_rotation", 0.25),
+    "Transmission Weight": ("transmission", 0.1), "Coat Weight": ("coat_weight", 0.5),
+    "Coat Roughness": ("coat_roughness", 0.2), "Coat IOR": ("coat_ior", 1.6),
+    "Coat Tint": ("coat_tint", (0.8, 0.9, 1.0)), "Sheen Weight": ("sheen_weight", 0.3),
+    "Sheen Roughness": ("sheen_roughness", 0.6), "Sheen Tint": ("sheen_tint", (0.7, 0.6, 0.5)),
+    "Thin Film Thickness": ("thin_film_thickness", 250.0),
+    "Thin Film IOR": ("thin_film_ior", 1.45),
+}
+
+
+def test_every_principled_input_reaches_its_closure():
+    scene = reset()
+    add_camera(scene)
+    cube = add_cube(scene)
+    mat = new_material("AllInputs")
+    p = principled(mat)
+    present = {}
+    for sock_name, (key, value) in PRINCIPLED_INPUTS.items():
+        sock = p.inputs.get(sock_name)
+        if sock is None:        # an input this Blender does not have yet (4.2: Thin Wall ...)
+            continue
+        sock.default_value = (*value, 1.0) if isinstance(value, tuple) else value
+        present[key] = value
+    p.inputs["Emission Color"].default_value = (1.0, 0.5, 0.25, 1.0)
+    p.inputs["Emission Strength"].default_value = 2.0
+    cube.data.materials.append(mat)
+    s = export()
+    (closure,) = material_of(s, "AllInputs").closures
+    assert closure.kind == "principled" and closure.node == p.name
+    assert len(present) >= 18
+    for key, value in present.items():
+        np.testing.assert_allclose(closure.params[key], value, rtol=1e-6, err_msg=key)
+    np.testing.assert_allclose(closure.params["emission"], [2.0, 1.0, 0.5], rtol=1e-6)
+    # What today's renderer cannot show is named: coat, sheen, transmission, alpha, rough metal.
+    said = " ".join(w for w in s.warnings if "'AllInputs'" in w)
+    for word in ("Coat Weight", "Sheen Weight", "Transmission", "Alpha", "metallic part"):
+        assert word in said, word
+
+
+def test_mix_and_add_shaders_flatten_into_weighted_closures():
+    scene = reset()
+    add_camera(scene)
+    mat = new_material("Layered")
+    tree = mat.node_tree
+    diff = tree.nodes.new("ShaderNodeBsdfDiffuse")
+    glossy = tree.nodes.new("ShaderNodeBsdfGlossy")
+    glossy.inputs["Roughness"].default_value = 0.2
+    glass = tree.nodes.new("ShaderNodeBsdfGlass")
+    glass.inputs["IOR"].default_value = 1.45
+    mix = tree.nodes.new("ShaderNodeMixShader")
+    mix.inputs["Fac"].default_value = 0.3
+    add = tree.nodes.new("ShaderNodeAddShader")
+    tree.links.new(diff.outputs[0], mix.inputs[1])
+    tree.links.new(glossy.outputs[0], mix.inputs[2])
+    tree.links.new(mix.outputs[0], add.inputs[0])
+    tree.links.new(glass.outputs[0], add.inputs[1])
+    set_surface(mat, add)
+    add_cube(scene).data.materials.append(mat)
+    s = export()
+    closures = material_of(s, "Layered").closures
+    assert [c.kind for c in closures] == ["diffuse", "glossy", "glass"]
+    np.testing.assert_allclose([c.weight[0] for c in closures], [0.7, 0.3, 1.0], rtol=1e-6)
+    assert closures[1].params["roughness"] == pytest.approx(0.2)
+    assert closures[1].distribution == "MULTI_GGX"
+    assert closures[2].params["ior"] == pytest.approx(1.45)
+
+
 def test_default_principled_is_not_emissive_and_no_material_is_grey():
     scene = reset()
     add_camera(scene)

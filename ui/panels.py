@@ -60,6 +60,7 @@ import textwrap
 import bpy
 
 from ..engine.blender import session
+from ..engine.shaders import lobe_names
 
 ENGINE_ID = "LANTERNA"
 MAX_LISTED_LIGHTS = 12      # area lights listed in the Shadow Photons panel
@@ -594,6 +595,9 @@ class LANTERNA_MATERIAL_PT_radiometry(LanternaPanel, bpy.types.Panel):
             row = col.row()
             row.label(text=name)
             row.label(text=_rgb_text(values))
+        lobes = lobe_names(derived.closures)
+        if lobes:
+            box.label(text="Lobes in Cycles' terms: " + ", ".join(lobes))
         for text in messages[:6]:
             _wrap(box, text, context, icon='INFO')
 

@@ -118,6 +118,7 @@ import bpy
 
 from ..settings import RenderSettings
 from . import compat
+from ..shaders import CLOSURE_KINDS, Closure, seed_reduction
 from ..scene import (AREA_SHAPES, AreaLight, Camera, Material, PointLight, Scene, SceneError,
                      SpotLight, SunLight, World)
 
@@ -349,24 +350,89 @@ class _NodeReader:
     def scalar(self, node, *names, default=0.0) -> float:
         return self._constant(node, names, default, _as_scalar, "value")
 
-    def check_normal(self, node) -> None:
-        sock = node.inputs.get("Normal")
+    def check_normal(self, node, socket_name: str = "Normal") -> None:
+        """Warn when a vector input (Normal, Coat Normal, Tangent) is linked: bump and normal
+        maps and custom tangents are ignored."""
+        sock = node.inputs.get(socket_name)
         src = self.source(sock) if sock is not None else None
         if src is not None:
             label = src[0].bl_label
-            self.warn(f"{self.owner}: Normal of '{node.name}' is driven by {_article(label)} "
-                      f"{label} node; bump and normal mapping are ignored")
+            what = ("custom tangents are ignored" if socket_name == "Tangent"
+                    else "bump and normal mapping are ignored")
+            self.warn(f"{self.owner}: {socket_name} of '{node.name}' is driven by "
+                      f"{_article(label)} {label} node; {what}")
 
     # Shaders -------------------------------------------------------------------------------
-    def shader(self, src, depth: int = 0):
-        """(rho_d, rho_s, exitance) of the shader feeding a socket; black when unlinked."""
-        zero = np.zeros(3)
+    def _principled(self, node) -> Closure:
+        c, x = self.colour, self.scalar
+        emission = (c(node, "Emission Color", "Emission", default=(1, 1, 1))
+                    * x(node, "Emission Strength", default=0.0))
+        params = {
+            "base_color": c(node, "Base Color", default=(0.8, 0.8, 0.8)),
+            "metallic": float(np.clip(x(node, "Metallic"), 0, 1)),
+            "roughness": float(np.clip(x(node, "Roughness", default=0.5), 0, 1)),
+            "ior": x(node, "IOR", default=1.5),
+            "alpha": float(np.clip(x(node, "Alpha", default=1.0), 0, 1)),
+            "thin_wall": float(bool(x(node, "Thin Wall", default=0.0))),
+            "diffuse_roughness": float(np.clip(x(node, "Diffuse Roughness"), 0, 1)),
+            "subsurface_weight": float(np.clip(x(node, "Subsurface Weight"), 0, 1)),
+            "specular_ior_level": max(x(node, "Specular IOR Level", default=0.5), 0.0),
+            "specular_tint": c(node, "Specular Tint", default=(1, 1, 1)),
+            "anisotropic": float(np.clip(x(node, "Anisotropic"), 0, 1)),
+            "anisotropic_rotation": x(node, "Anisotropic Rotation"),
+            "transmission": float(np.clip(x(node, "Transmission Weight", "Transmission"), 0, 1)),
+            "coat_weight": max(x(node, "Coat Weight"), 0.0),
+            "coat_roughness": float(np.clip(x(node, "Coat Roughness", default=0.03), 0, 1)),
+            "coat_ior": x(node, "Coat IOR", default=1.5),
+            "coat_tint": c(node, "Coat Tint", default=(1, 1, 1)),
+            "sheen_weight": max(x(node, "Sheen Weight"), 0.0),
+            "sheen_roughness": float(np.clip(x(node, "Sheen Roughness", default=0.5), 0, 1)),
+            "sheen_tint": c(node, "Sheen Tint", default=(1, 1, 1)),
+            "emission": emission,
+            "thin_film_thickness": max(x(node, "Thin Film Thickness"), 0.0),
+            "thin_film_ior": x(node, "Thin Film IOR", default=1.33),
+        }
+        for vector in ("Normal", "Coat Normal", "Tangent"):
+            self.check_normal(node, vector)
+        return Closure("principled", params=params, node=node.name,
+                       distribution=getattr(node, "distribution", ""))
+
+    def _microfacet(self, node, kind: str) -> Closure:
+        c, x = self.colour, self.scalar
+        params = {"roughness": float(np.clip(x(node, "Roughness", default=0.5), 0, 1))}
+        if kind == "metallic":
+            params.update(base_color=c(node, "Base Color", default=(0.617, 0.577, 0.540)),
+                          edge_tint=c(node, "Edge Tint", default=(0.695, 0.726, 0.770)),
+                          physical=float(getattr(node, "fresnel_type", "F82") != "F82"))
+            for key, sock_name in (("ior", "IOR"), ("extinction", "Extinction")):
+                sock = self.input(node, sock_name)
+                if sock is not None:
+                    params[key] = np.array(sock.default_value[:3], float)
+        else:
+            params["color"] = c(node, "Color", default=(0.8, 0.8, 0.8))
+        if kind in ("glossy", "metallic"):
+            params["anisotropy"] = float(np.clip(x(node, "Anisotropy"), -1, 1))
+            params["rotation"] = x(node, "Rotation")
+        if kind in ("glass", "refraction"):
+            params["ior"] = x(node, "IOR", default=1.5 if kind == "glass" else 1.45)
+        if kind in ("glass", "metallic"):
+            params["thin_film_thickness"] = max(x(node, "Thin Film Thickness"), 0.0)
+            params["thin_film_ior"] = x(node, "Thin Film IOR", default=1.33)
+        for vector in ("Normal", "Tangent"):
+            self.check_normal(node, vector)
+        return Closure(kind, params=params, node=node.name,
+                       distribution=getattr(node, "distribution", ""))
+
+    def closures(self, src, depth: int = 0) -> list:
+        """The weighted closures of the shader feeding a socket, as Cycles flattens a shader
+        tree (Mix Shader: (1 - Fac) and Fac times its inputs' closures; Add Shader: both
+        lists); empty when unlinked."""
         if src is None:
-            return zero, zero, zero
+            return []
         node, out = src
         t = node.type
         name = f"'{node.name}'"
-        grey = (np.full(3, DEFAULT_DIFFUSE), zero, zero)
+        grey = [Closure("diffuse", params={"color": np.full(3, DEFAULT_DIFFUSE)}, node=node.name)]
         if depth > 64:
             self.warn(f"{self.owner}: shader nodes nested too deep at {name}; using grey")
             return grey
@@ -374,82 +440,50 @@ class _NodeReader:
             self.warn(f"{self.owner}: {node.bl_label} node {name} (not a shader) feeds a shader "
                       f"input; using grey diffuse {DEFAULT_DIFFUSE}")
             return grey
-
         if t == "BSDF_PRINCIPLED":
-            base = self.colour(node, "Base Color", default=(0.8, 0.8, 0.8))
-            metallic = float(np.clip(self.scalar(node, "Metallic"), 0, 1))
-            transmission = float(np.clip(self.scalar(node, "Transmission Weight", "Transmission"),
-                                         0, 1))
-            diffuse = base * (1 - metallic) * (1 - transmission)
-            specular = base * metallic
-            emission = (math.pi * self.colour(node, "Emission Color", "Emission",
-                                              default=(1, 1, 1))
-                        * self.scalar(node, "Emission Strength", default=0.0))
-            if metallic > 0:
-                rough = self.scalar(node, "Roughness", default=0.5)
-                if rough > 0.1:
-                    self.warn(f"{self.owner}: metallic part of {name} (Roughness {_fmt(rough)}) "
-                              f"is rendered as a perfect mirror")
-            if transmission > 0:
-                self.warn(f"{self.owner}: Transmission {_fmt(transmission)} of {name} is not "
-                          f"supported; the transmitted light is lost")
-            for sock_name in ("Coat Weight", "Sheen Weight"):
-                if self.input(node, sock_name) is not None and self.scalar(node, sock_name) > 0:
-                    self.warn(f"{self.owner}: {sock_name} of {name} is ignored")
-            if self.input(node, "Alpha") is not None and self.scalar(node, "Alpha", default=1) < 1:
-                self.warn(f"{self.owner}: Alpha < 1 of {name} is ignored (rendered opaque)")
-            self.check_normal(node)
-            return diffuse, specular, emission
-
+            return [self._principled(node)]
         if t == "BSDF_DIFFUSE":
             self.check_normal(node)
-            return self.colour(node, "Color", default=(0.8, 0.8, 0.8)), zero, zero
-
+            return [Closure("diffuse", params={
+                "color": self.colour(node, "Color", default=(0.8, 0.8, 0.8)),
+                "roughness": float(np.clip(self.scalar(node, "Roughness"), 0, 1))},
+                node=node.name)]
         if t == "EMISSION":
-            return zero, zero, (math.pi * self.colour(node, "Color", default=(1, 1, 1))
-                                * self.scalar(node, "Strength", default=1.0))
-
-        if t in ("BSDF_GLOSSY", "BSDF_ANISOTROPIC", "BSDF_METALLIC"):
-            if t == "BSDF_METALLIC" and getattr(node, "fresnel_type", "F82") != "F82":
-                n = np.array(self.input(node, "IOR").default_value[:3], float)
-                k = np.array(self.input(node, "Extinction").default_value[:3], float)
-                specular = ((n - 1) ** 2 + k ** 2) / np.maximum((n + 1) ** 2 + k ** 2, 1e-12)
-            else:
-                specular = self.colour(node, "Base Color", "Color", default=(0.8, 0.8, 0.8))
-            rough = self.scalar(node, "Roughness", default=0.5)
-            if rough > 0.1:
-                self.warn(f"{self.owner}: {node.bl_label} {name} (Roughness {_fmt(rough)}) is "
-                          f"rendered as a perfect mirror")
-            self.check_normal(node)
-            return zero, specular, zero
-
+            return [Closure("emission", params={
+                "radiance": (self.colour(node, "Color", default=(1, 1, 1))
+                             * self.scalar(node, "Strength", default=1.0))}, node=node.name)]
+        kinds = {"BSDF_GLOSSY": "glossy", "BSDF_ANISOTROPIC": "glossy",
+                 "BSDF_METALLIC": "metallic", "BSDF_GLASS": "glass",
+                 "BSDF_REFRACTION": "refraction"}
+        if t in kinds:
+            return [self._microfacet(node, kinds[t])]
         if t in ("MIX_SHADER", "ADD_SHADER"):
             shaders = [s for s in node.inputs if s.type == "SHADER"]
-            a = self.shader(self.source(shaders[0]), depth + 1)
-            b = self.shader(self.source(shaders[1]), depth + 1)
+            a = self.closures(self.source(shaders[0]), depth + 1)
+            b = self.closures(self.source(shaders[1]), depth + 1)
             if t == "ADD_SHADER":
-                return tuple(x + y for x, y in zip(a, b))
+                return a + b
             fac = float(np.clip(self.scalar(node, "Fac", "Factor", default=0.5), 0, 1))
-            return tuple((1 - fac) * x + fac * y for x, y in zip(a, b))
-
-        if t in ("BSDF_GLASS", "BSDF_REFRACTION"):
-            ior = self.scalar(node, "IOR", default=1.5)
-            f0 = ((ior - 1) / (ior + 1)) ** 2
-            self.warn(f"{self.owner}: refraction of {node.bl_label} {name} is not supported; "
-                      f"only its reflection ({_fmt(f0)} at normal incidence) is kept, as a mirror")
-            colour = self.colour(node, "Color", default=(1, 1, 1))
-            return zero, colour * f0, zero
-
-        if t in ("BSDF_TRANSPARENT", "HOLDOUT"):
-            self.warn(f"{self.owner}: {node.bl_label} {name} is not supported; rendered black")
-            return zero, zero, zero
+            return [c.scaled(1 - fac) for c in a] + [c.scaled(fac) for c in b]
+        if t in ("BSDF_TRANSPARENT", "BSDF_TRANSLUCENT", "BSDF_SHEEN"):
+            kind = {"BSDF_TRANSPARENT": "transparent", "BSDF_TRANSLUCENT": "translucent",
+                    "BSDF_SHEEN": "sheen"}[t]
+            params = {"color": self.colour(node, "Color", default=CLOSURE_KINDS[kind]["color"])}
+            if kind == "sheen":
+                params["roughness"] = float(np.clip(self.scalar(node, "Roughness", default=0.5),
+                                                    0, 1))
+            if kind != "transparent":
+                self.check_normal(node)
+            return [Closure(kind, params=params, node=node.name)]
+        if t == "HOLDOUT":
+            return [Closure("holdout", node=node.name)]
 
         colour_sock = self.input(node, "Color", "Base Color")
         if colour_sock is not None:
             colour = self.colour(node, "Color", "Base Color", default=(0.8, 0.8, 0.8))
             self.warn(f"{self.owner}: {node.bl_label} {name} is not supported; treated as a "
                       f"diffuse of colour {_fmt(colour)}")
-            return colour, zero, zero
+            return [Closure("diffuse", params={"color": colour}, node=node.name)]
         self.warn(f"{self.owner}: {node.bl_label} {name} is not supported; using grey diffuse "
                   f"{DEFAULT_DIFFUSE}")
         return grey
@@ -521,9 +555,12 @@ def material_from_nodes(mat, warn=None) -> Material:
         warn(f"Material '{name}': nothing is connected to the Material Output's Surface; "
              f"rendered black")
         return Material(name, diffuse=np.zeros(3))
-    d, s, e = reader.shader(src)
-    d, s, e = _clamp_reflectances(name, d, s, e, warn)
-    return Material(name, diffuse=d, specular=s, exitance=e)
+    closures = reader.closures(src)
+    seed = seed_reduction(closures)
+    for note in seed.notes:
+        warn(f"{reader.owner}: {note}")
+    d, s, e = _clamp_reflectances(name, seed.diffuse, seed.specular, seed.exitance, warn)
+    return Material(name, diffuse=d, specular=s, exitance=e, closures=tuple(closures))
 
 
 # ---------------------------------------------------------------------------------------------

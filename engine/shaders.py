@@ -1,0 +1,259 @@
+"""Surface shaders as Cycles sees them: a flat list of weighted closures, and what today's
+renderer makes of them.
+
+What it computes
+----------------
+Cycles evaluates a material's node tree into a list of *closures*, each a BSDF (or an
+emission) with an RGB weight: a Mix Shader multiplies the weights of the closures below its
+two inputs by (1 - Fac) and Fac, an Add Shader concatenates the two lists. A :class:`Closure`
+here is one entry of that list: the node's kind, its weight, its inputs as numbers (constant
+per material for now; the textures issue feeds per-hit values into the same slots through
+``bsdf.MaterialTable.at``) and the node's name, for messages. Export
+(``engine/blender/export.py``) builds the list from Blender's nodes; ``CLOSURE_KINDS`` below
+is the list of kinds, their parameters and defaults (Blender 5.2 LTS's node defaults).
+
+:func:`seed_reduction` turns closures into the seed's three radiometric properties (section
+3.2: a Lambertian rho_d, a perfect mirror rho_s and an exitance M), the material model the
+camera, the photons and the cache evaluate today, and names every approximation it makes, so
+that nothing is approximated without a word:
+
+=============  ================================================================================
+closure        seed material (weight w multiplies each line)
+=============  ================================================================================
+principled     rho_d = Base Color (1 - Metallic)(1 - Transmission); rho_s = Base Color x
+               Metallic as a mirror (roughness, the dielectric specular layer, coat, sheen,
+               transmission, thin film, alpha: reported when they matter)
+diffuse        rho_d = Color (Roughness > 0, Oren-Nayar, reported)
+glossy         rho_s = Color, a mirror (Roughness > 0.1 reported)
+metallic       rho_s = Base Color (F82) or ((n-1)^2 + k^2) / ((n+1)^2 + k^2) (physical), a mirror
+glass,         rho_s = Color x ((IOR - 1) / (IOR + 1))^2, the normal-incidence reflection as a
+refraction     mirror; the refraction is lost (reported)
+transparent,   black (reported)
+holdout
+translucent,   rho_d = Color (reported)
+sheen
+emission       M = pi x Color x Strength (radiance Color x Strength on each side)
+=============  ================================================================================
+
+Parameters of a closure (``Closure.params``; colours are linear RGB, (3,) float64)
+    see ``CLOSURE_KINDS``: every key a kind has, with its default. Roughness is Blender's
+    (alpha = roughness^2 for GGX), IOR is relative (outside medium 1), angles in units of a
+    full turn as Blender's Anisotropic Rotation, thin-film thickness in nm.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["Closure", "CLOSURE_KINDS", "SeedMaterial", "seed_reduction", "lobe_names"]
+
+_WHITE = (1.0, 1.0, 1.0)
+_GREY = (0.8, 0.8, 0.8)
+
+# kind -> {parameter: default}. Colours are 3-tuples; everything else a float (booleans 0/1).
+CLOSURE_KINDS: dict[str, dict] = {
+    "principled": {
+        "base_color": _GREY, "metallic": 0.0, "roughness": 0.5, "ior": 1.5, "alpha": 1.0,
+        "thin_wall": 0.0, "diffuse_roughness": 0.0, "subsurface_weight": 0.0,
+        "specular_ior_level": 0.5, "specular_tint": _WHITE, "anisotropic": 0.0,
+        "anisotropic_rotation": 0.0, "transmission": 0.0, "coat_weight": 0.0,
+        "coat_roughness": 0.03, "coat_ior": 1.5, "coat_tint": _WHITE, "sheen_weight": 0.0,
+        "sheen_roughness": 0.5, "sheen_tint": _WHITE, "emission": (0.0, 0.0, 0.0),
+        "thin_film_thickness": 0.0, "thin_film_ior": 1.33,
+    },
+    "diffuse": {"color": _GREY, "roughness": 0.0},
+    "glossy": {"color": _GREY, "roughness": 0.5, "anisotropy": 0.0, "rotation": 0.0},
+    "metallic": {
+        "base_color": (0.617, 0.577, 0.540), "edge_tint": (0.695, 0.726, 0.770),
+        "ior": (2.757, 2.513, 2.231), "extinction": (3.867, 3.404, 3.009), "physical": 0.0,
+        "roughness": 0.5, "anisotropy": 0.0, "rotation": 0.0, "thin_film_thickness": 0.0,
+        "thin_film_ior": 1.33,
+    },
+    "glass": {"color": _WHITE, "roughness": 0.0, "ior": 1.5, "thin_film_thickness": 0.0,
+              "thin_film_ior": 1.33},
+    "refraction": {"color": _WHITE, "roughness": 0.0, "ior": 1.45},
+    "transparent": {"color": _WHITE},
+    "translucent": {"color": _GREY},
+    "sheen": {"color": _GREY, "roughness": 0.5},
+    "emission": {"radiance": _WHITE},
+    "holdout": {},
+}
+
+# Principled inputs at or below these values change nothing that today's renderer could show.
+_MIRROR_ROUGHNESS = 0.1
+
+
+@dataclass
+class Closure:
+    """One weighted closure of a material (see the module docstring).
+
+    ``kind`` a key of ``CLOSURE_KINDS``; ``weight`` (3,) the product of the Mix/Add factors
+    above it; ``params`` the kind's parameters (missing ones take ``CLOSURE_KINDS``'
+    defaults); ``node`` the Blender node's name; ``distribution`` Blender's microfacet
+    distribution (``MULTI_GGX``, ``GGX``, ``BECKMANN``, ``ASHIKHMIN_SHIRLEY``) or ""."""
+
+    kind: str
+    weight: np.ndarray = field(default_factory=lambda: np.ones(3))
+    params: dict = field(default_factory=dict)
+    node: str = ""
+    distribution: str = ""
+
+    def __post_init__(self):
+        if self.kind not in CLOSURE_KINDS:
+            raise ValueError(f"unknown closure kind {self.kind!r}")
+        self.weight = np.broadcast_to(np.asarray(self.weight, np.float64), (3,)).copy()
+        full = {}
+        for key, default in CLOSURE_KINDS[self.kind].items():
+            value = self.params.get(key, default)
+            full[key] = (np.broadcast_to(np.asarray(value, np.float64), (3,)).copy()
+                         if isinstance(default, tuple) else float(value))
+        unknown = set(self.params) - set(full)
+        if unknown:
+            raise ValueError(f"closure {self.kind!r} has no parameter(s) {sorted(unknown)}")
+        self.params = full
+
+    def scaled(self, factor) -> "Closure":
+        """This closure with its weight multiplied by ``factor`` (a scalar or RGB)."""
+        return Closure(self.kind, self.weight * np.asarray(factor, np.float64), dict(self.params),
+                       self.node, self.distribution)
+
+
+@dataclass
+class SeedMaterial:
+    """The seed's material (section 3.2) made of closures, and the approximations made."""
+
+    diffuse: np.ndarray
+    specular: np.ndarray
+    exitance: np.ndarray
+    notes: list = field(default_factory=list)
+
+
+def _f0(ior: float) -> float:
+    """Fresnel reflectance of a dielectric at normal incidence, ((n - 1) / (n + 1))^2."""
+    return ((ior - 1.0) / (ior + 1.0)) ** 2 if ior > 0 else 0.0
+
+
+def _fmt(value) -> str:
+    arr = np.asarray(value, float)
+    if arr.ndim == 0:
+        return f"{float(arr):.3g}"
+    return "(" + ", ".join(f"{x:.3g}" for x in arr) + ")"
+
+
+def _principled(c: Closure, note):
+    p = c.params
+    name = f"'{c.node}'"
+    metallic = float(np.clip(p["metallic"], 0, 1))
+    transmission = float(np.clip(p["transmission"], 0, 1))
+    base = p["base_color"]
+    diffuse = base * (1 - metallic) * (1 - transmission)
+    specular = base * metallic
+    exitance = math.pi * p["emission"]
+    if metallic > 0 and p["roughness"] > _MIRROR_ROUGHNESS:
+        note(f"metallic part of {name} (Roughness {_fmt(p['roughness'])}) is rendered as a "
+             "perfect mirror")
+    if transmission > 0:
+        note(f"Transmission {_fmt(transmission)} of {name} is not supported; the transmitted "
+             "light is lost")
+    if p["coat_weight"] > 0:
+        note(f"Coat Weight of {name} is ignored")
+    if p["sheen_weight"] > 0:
+        note(f"Sheen Weight of {name} is ignored")
+    if p["alpha"] < 1:
+        note(f"Alpha < 1 of {name} is ignored (rendered opaque)")
+    return diffuse, specular, exitance
+
+
+def seed_reduction(closures) -> SeedMaterial:
+    """The seed's (rho_d, rho_s, M) of a list of :class:`Closure` (see the module docstring's
+    table), with one note per approximation, each naming the node. Values are not clipped
+    (export clips them, with its own message)."""
+    diffuse, specular, exitance = np.zeros(3), np.zeros(3), np.zeros(3)
+    notes: list[str] = []
+
+    def note(message: str) -> None:
+        if message not in notes:
+            notes.append(message)
+
+    for c in closures:
+        p, w, name = c.params, c.weight, f"'{c.node}'"
+        d = s = e = np.zeros(3)
+        if c.kind == "principled":
+            d, s, e = _principled(c, note)
+        elif c.kind == "diffuse":
+            d = p["color"]
+        elif c.kind == "emission":
+            e = math.pi * p["radiance"]
+        elif c.kind in ("glossy", "metallic"):
+            if c.kind == "metallic" and p["physical"]:
+                n, k = p["ior"], p["extinction"]
+                s = ((n - 1) ** 2 + k ** 2) / np.maximum((n + 1) ** 2 + k ** 2, 1e-12)
+            else:
+                s = p["base_color"] if c.kind == "metallic" else p["color"]
+            if p["roughness"] > _MIRROR_ROUGHNESS:
+                label = "Metallic BSDF" if c.kind == "metallic" else "Glossy BSDF"
+                note(f"{label} {name} (Roughness {_fmt(p['roughness'])}) is rendered as a "
+                     "perfect mirror")
+        elif c.kind in ("glass", "refraction"):
+            f0 = _f0(p["ior"])
+            label = "Glass BSDF" if c.kind == "glass" else "Refraction BSDF"
+            note(f"refraction of {label} {name} is not supported; only its reflection "
+                 f"({_fmt(f0)} at normal incidence) is kept, as a mirror")
+            s = p["color"] * f0
+        elif c.kind in ("transparent", "holdout"):
+            label = "Transparent BSDF" if c.kind == "transparent" else "Holdout"
+            note(f"{label} {name} is not supported; rendered black")
+        elif c.kind in ("translucent", "sheen"):
+            d = p["color"]
+            label = "Translucent BSDF" if c.kind == "translucent" else "Sheen BSDF"
+            note(f"{label} {name} is not supported; treated as a diffuse of colour {_fmt(d)}")
+        diffuse = diffuse + w * d
+        specular = specular + w * s
+        exitance = exitance + w * e
+    return SeedMaterial(diffuse, specular, exitance, notes)
+
+
+def lobe_names(closures) -> list[str]:
+    """The scattering lobes a material's closures make, in Cycles' terms (what the Material
+    panel lists): e.g. ``["diffuse", "specular (dielectric)", "emission"]``."""
+    names: list[str] = []
+
+    def add(name):
+        if name not in names:
+            names.append(name)
+
+    for c in closures:
+        if not np.any(c.weight > 0):
+            continue
+        p = c.params
+        if c.kind == "principled":
+            metallic, transmission = p["metallic"], p["transmission"]
+            if metallic < 1 and transmission < 1:
+                add("diffuse" if p["diffuse_roughness"] == 0 else "diffuse (Oren-Nayar)")
+            if metallic < 1 and p["specular_ior_level"] > 0:
+                add("specular (dielectric)")
+            if metallic > 0:
+                add("specular (metal, F82 tint)")
+            if transmission > 0 and metallic < 1:
+                add("transmission")
+            if p["coat_weight"] > 0:
+                add("coat")
+            if p["sheen_weight"] > 0:
+                add("sheen")
+            if p["subsurface_weight"] > 0:
+                add("subsurface")
+            if np.any(p["emission"] > 0):
+                add("emission")
+        elif c.kind == "diffuse":
+            add("diffuse" if p["roughness"] == 0 else "diffuse (Oren-Nayar)")
+        elif c.kind == "glossy":
+            add("specular (glossy)")
+        elif c.kind == "metallic":
+            add("specular (metal, physical)" if p["physical"] else "specular (metal, F82 tint)")
+        elif c.kind in ("glass", "refraction"):
+            add("transmission")
+        else:
+            add(c.kind)
+    return names
