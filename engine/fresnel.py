@@ -137,10 +137,13 @@ def dielectric_average(eta):
 
 
 def _rgb(x, count):
-    """(count, 3) from a scalar, a per-hit (count,) array or a (count, 3) array."""
+    """(count, 3) from a scalar, one RGB colour (3,), a per-hit (count,) array (count != 3)
+    or a (count, 3) array."""
     x = np.asarray(x, dtype=float)
     if x.ndim == 0:
         return np.full((count, 3), float(x))
+    if x.shape == (3,):
+        return np.broadcast_to(x, (count, 3)).copy()
     if x.ndim == 1:
         return np.repeat(x[:, None], 3, axis=1)
     return x

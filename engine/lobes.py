@@ -34,7 +34,8 @@ Lobes and the papers they follow
         multiple-scattering term of the energy-preserving Oren-Nayar (EON, Portsmouth, Kutz
         and Hill 2025, JCGT 14(1); OpenPBR) f_ms = rho E_ms (1 - E(mu_o))(1 - E(mu_i)) with
         E_ms = rho'^2 Eavg / (pi (1 - Eavg)(1 - rho' (1 - Eavg))), rho' = clip(rho, 0, 1),
-        and Cycles' Eavg = pi A + B (2 pi - 5.6)/3. Note the leading rho: Cycles multiplies
+        and Cycles' Eavg = pi A + B (2 pi - 5.6)/3 (the exact mean of E: 2 int G mu dmu =
+        (2 pi - 5.6)/3 to 1e-10 by quadrature, so the white furnace is 1). Note the leading rho: Cycles multiplies
         the whole closure (the multiple-scattering term included) by the colour, so its
         f_ms carries rho^3 where the EON paper has rho^2; we follow Cycles. Cosine sampling.
     ``Translucent``  colour / pi on the side opposite wo; cosine sampling about -n.
@@ -112,6 +113,8 @@ def _rgb(x, count):
     x = np.asarray(x, dtype=float)
     if x.ndim == 0:
         return np.full((count, 3), float(x))
+    if x.shape == (3,):
+        return np.broadcast_to(x, (count, 3)).copy()
     if x.ndim == 1:
         return np.repeat(x[:, None], 3, axis=1)
     return x
@@ -426,7 +429,7 @@ def oren_nayar_g(mu):
     return np.where(small, _ON_G0 - mu, g)
 
 
-# 2 int_0^1 G(mu) mu dmu, the exact mean of G (Cycles' Eavg uses (2 pi - 5.6) / 3 for it).
+# 2 int_0^1 G(mu) mu dmu by quadrature (Cycles writes it (2 pi - 5.6) / 3; they agree to 1e-10).
 _ON_G_MEAN = float(np.sum(0.5 * _ON_GL_W * 2.0 * 0.5 * (_ON_GL_X + 1.0) *
                           oren_nayar_g(0.5 * (_ON_GL_X + 1.0))))
 _ON_G_MEAN_CYCLES = (2.0 * np.pi - 5.6) / 3.0
