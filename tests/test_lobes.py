@@ -31,10 +31,11 @@ away from the axes, so that a frame bug shows), with these checks:
   degrees, the averages against quadrature), Cycles' roughness mappings, and the tables
   against a fresh small run of ``tools/microfacet_tables.py``.
 
-Planted bugs these tests were run against (each made at least one test fail): pdf without
-its 1/4 (reflection), G1 dropped from the VNDF pdf, the refraction Jacobian's eta^2 dropped,
-the glass lobe choice using 1 - F for reflection, Lambda with alpha_x and alpha_y swapped, the
-compensation factor squared, the Oren-Nayar B term doubled, translucent sampled about +n.
+Planted bugs these tests were run against (each made at least one test fail; the run is in
+the commit that added this note): the reflection pdf without its 1/4, G1 dropped from the
+reflection pdf, the refraction Jacobian without eta^2, glass picking reflection with 1 - F,
+Lambda with alpha_x and alpha_y swapped, the compensation factor squared, the Oren-Nayar B
+term doubled, translucent sampled about +n, GGX D reshaped by s^0.05, F82's b with (6/7)^5.
 """
 import importlib.util
 from pathlib import Path
