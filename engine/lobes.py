@@ -56,6 +56,10 @@ Cycles' conventions kept here (``intern/cycles/kernel/closure/bsdf_microfacet.h`
       again, and differs only for a camera or an emitter inside a medium. A photon tracer
       that wants Cycles' brightness therefore uses the same ``sample`` with the photon's
       reversed direction as wo: its weight is the share of flux carried on.
+    * Near-deltas: an index within 1e-4 of 1 refracts straight through (pdf inf), as Cycles
+      treats it; widths are kept >= 1e-4 in the formulas. Cycles (to 5.1) switches a
+      microfacet closure to a delta below alpha_x alpha_y = 2e-10; the caller picks
+      ``SmoothReflection`` / ``SmoothGlass`` there.
     * Where the refraction half vector gives a pair no microfacet can connect (wo.h and wi.h
       not on opposite sides of h), f_t and pdf are 0. Cycles evaluates such pairs without
       that check (a TODO in its ``bsdf_microfacet_eval``), which only matters for light
@@ -323,6 +327,10 @@ class MicrofacetGlass:
                              (1.0 - P)[:, None], F * self.reflection_tint / P[:, None])
         weight = np.nan_to_num(share) * ratio[:, None] * self._scale(lo[:, 2])
         pdf = np.where(valid, np.nan_to_num(pdf, nan=0.0, posinf=0.0), 0.0)
+        # An index within 1e-4 of 1 refracts straight through: a delta, as in Cycles.
+        straight = valid & refract & (np.abs(eta - 1.0) < 1e-4)
+        pdf = np.where(straight, np.inf, pdf)
+        weight = np.where(straight[:, None], np.nan_to_num(share) * self._scale(lo[:, 2]), weight)
         return mf.from_local(li, t, b, n), weight, pdf
 
     def albedo(self, wo, n):

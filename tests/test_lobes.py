@@ -353,6 +353,12 @@ def test_delta_lobes():
     wi, weight, _ = tinted.sample(wo, n, rng.random((count, 3)))
     np.testing.assert_allclose(weight.mean(axis=0), tinted.albedo(wo[:1], n[:1])[0],
                                atol=0.01)
+    # Rough glass of index 1 is a pass-through (Cycles' singular case), weight 1.
+    index_one = L.MicrofacetGlass(np.full(count, 0.3), 1.0)
+    wi, weight, pdf = index_one.sample(wo, n, rng.random((count, 3)))
+    np.testing.assert_allclose(wi, -wo, atol=1e-12)
+    np.testing.assert_allclose(weight, 1.0)
+    assert np.all(np.isinf(pdf))
     # Mirror with a metal Fresnel; transparent passes straight through.
     mirror = L.SmoothReflection(fr.F82TintFresnel(np.full((count, 3), 0.8)))
     wi, weight, pdf = mirror.sample(wo, n)
