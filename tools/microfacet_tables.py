@@ -28,7 +28,7 @@ Parameters
     ==========  =======  ============================================================
 
 Run from a checkout (the package importable as ``lanterna``):
-    python tools/microfacet_tables.py            (about 3 minutes on one core)
+    python tools/microfacet_tables.py            (about 2 minutes on one core)
 """
 from __future__ import annotations
 
