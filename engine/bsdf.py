@@ -37,12 +37,25 @@ Parameters (per material, ``Scene.materials``; per hit after ``at``)
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
+from . import fresnel as fresnel_model
+from . import microfacet
 from . import sampling
+from .lobes import MicrofacetReflection, SmoothReflection
 
 __all__ = ["MaterialTable", "SurfaceParams", "Lambertian", "PerfectMirror", "SurfaceBSDF",
-           "roulette_probabilities", "reflect"]
+           "roulette_probabilities", "reflect", "GlossyLobe", "GlossyMaterial",
+           "glossy_material", "SHARP_ALPHA"]
+
+# A glossy lobe narrower than this (sqrt(alpha_x alpha_y)) takes the light of emitters it can
+# hit (emissive meshes, the world) from its own sampled rays instead of from light samples:
+# light samples rarely land inside a narrow lobe. Each lobe counts each emitter exactly once.
+SHARP_ALPHA = 0.1
+# Below this alpha_x alpha_y a microfacet lobe is a mirror (Cycles' delta threshold).
+DELTA_ALPHA2 = 2e-10
 
 
 def roulette_probabilities(rho_d: np.ndarray, rho_s: np.ndarray):
@@ -85,6 +98,10 @@ class MaterialTable:
         self.has_specular = bool(self.is_specular.any())
         self.has_emission = bool(self.is_emissive.any())
         self.count = len(self.diffuse)
+        # Glossy lobes seen by camera paths (issue 23): per material a GlossyMaterial or None.
+        self.glossy = [glossy_material(getattr(m, "closures", ())) for m in scene.materials]
+        self.camera_glossy = np.array([g is not None for g in self.glossy], bool)
+        self.has_glossy = bool(self.camera_glossy.any())
         # Every parameter is one value per material (no textures yet): stages may then work
         # on per-material tables (the camera's histogram of direct light per material).
         self.constant_per_material = True
@@ -119,6 +136,7 @@ class SurfaceParams:
     both_sides = property(lambda self: self._take("both_sides"))
     is_diffuse = property(lambda self: self._take("is_diffuse"))
     is_specular = property(lambda self: self._take("is_specular"))
+    camera_glossy = property(lambda self: self._take("camera_glossy"))
 
     def subset(self, index) -> "SurfaceParams":
         """The parameters of the hits ``index`` (an index array or mask)."""
@@ -226,3 +244,127 @@ class SurfaceBSDF:
 
     def albedo(self):
         return self.params.diffuse + self.params.specular
+
+
+# -- Glossy materials seen by the camera (issue 23) ----------------------------------------------
+@dataclass
+class GlossyLobe:
+    """One GGX reflection lobe of a material: ``weight`` (3,) times a ``MicrofacetReflection``
+    (or ``SmoothReflection`` below ``DELTA_ALPHA2``) of widths (alpha_x, alpha_y) and a Fresnel
+    made by ``make_fresnel(count)``; ``multiscatter`` is Cycles' Multiscatter GGX."""
+
+    weight: np.ndarray
+    alpha_x: float
+    alpha_y: float
+    make_fresnel: object
+    multiscatter: bool
+
+    @property
+    def delta(self) -> bool:
+        return self.alpha_x * self.alpha_y < DELTA_ALPHA2
+
+    @property
+    def sharp(self) -> bool:
+        return self.delta or np.sqrt(self.alpha_x * self.alpha_y) < SHARP_ALPHA
+
+    def at(self, count: int):
+        fresnel = self.make_fresnel(count)
+        if self.delta:
+            return SmoothReflection(fresnel)
+        return MicrofacetReflection(np.full(count, self.alpha_x), np.full(count, self.alpha_y),
+                                    fresnel, multiscatter=self.multiscatter)
+
+
+@dataclass
+class GlossyMaterial:
+    """The glossy lobes of one material and, for a Principled BSDF, its dielectric specular
+    layer, which scales the diffuse below it by 1 - max_channel(E_layer(mu_o)) (Cycles'
+    ``closure_layering_weight``; E the layer's directional albedo with its Fresnel and
+    multiple-scattering compensation)."""
+
+    lobes: list
+    layer: GlossyLobe | None = None
+
+    def diffuse_factor(self, wo, n) -> np.ndarray:
+        """(N,) the share of the diffuse below the layer at view directions ``wo``."""
+        if self.layer is None:
+            return np.ones(len(wo))
+        albedo = self.layer.at(len(wo)).albedo(wo, n)
+        return np.clip(1.0 - albedo.max(axis=1), 0.0, 1.0)
+
+
+def _principled_lobes(c, lobes):
+    """Cycles' Principled stack (``svm/closure.h``): metal (F82 tint), then the dielectric
+    specular layer over the diffuse; returns the layer (sheen, coat, transmission and alpha
+    are not rendered by camera paths yet: export names them)."""
+    p, weight = c.params, c.weight.copy()
+    multiscatter = c.distribution in ("MULTI_GGX", "")
+    ax, ay = (float(v) for v in microfacet.alpha_principled(p["roughness"], p["anisotropic"]))
+    metallic = float(np.clip(p["metallic"], 0, 1))
+    if metallic > 0:
+        f0 = np.clip(p["base_color"], 0, 1)
+        tint = np.clip(p["specular_tint"], 0, 1)
+        lobes.append(GlossyLobe(weight * metallic, ax, ay,
+                                lambda n, f0=f0, tint=tint: fresnel_model.F82TintFresnel(
+                                    np.broadcast_to(f0, (n, 3)), tint),
+                                multiscatter))
+        weight = weight * (1 - metallic)
+    weight = weight * (1 - float(np.clip(p["transmission"], 0, 1)))
+    ior = max(float(p["ior"]), 1e-5)
+    f0 = float(fresnel_model.f0_from_ior(ior))
+    eta = ior
+    if p["specular_ior_level"] != 0.5:
+        f0 *= 2.0 * p["specular_ior_level"]
+        root = np.sqrt(min(f0, 1.0 - 1e-9))
+        eta = float((1 + root) / (1 - root))
+        if ior < 1:
+            eta = 1.0 / eta
+    if eta == 1.0 or not np.any(weight > 0):
+        return None
+    tinted = f0 * np.maximum(p["specular_tint"], 0)
+    layer = GlossyLobe(weight, ax, ay,
+                       lambda n, eta=eta, tinted=tinted: fresnel_model.TintedDielectricFresnel(
+                           np.full(n, eta), np.broadcast_to(tinted, (n, 3))),
+                       multiscatter)
+    lobes.append(layer)
+    return layer
+
+
+def glossy_material(closures) -> GlossyMaterial | None:
+    """The camera's glossy lobes of a material's closures (``engine/shaders.py``): Principled
+    (metal and dielectric layer), Glossy (Fresnel = its colour) and Metallic (F82 tint or the
+    physical conductor) closures; None when there are none. Diffuse, emission, glass and the
+    rest stay with the seed's reduction (``shaders.seed_reduction``)."""
+    lobes, layer = [], None
+    for c in closures:
+        if not np.any(c.weight > 0):
+            continue
+        p = c.params
+        multiscatter = c.distribution in ("MULTI_GGX", "")
+        if c.kind == "principled":
+            found = _principled_lobes(c, lobes)
+            if found is not None:
+                if layer is not None:
+                    return None          # two layered Principled closures: not split yet
+                layer = found
+        elif c.kind == "glossy":
+            ax, ay = (float(v) for v in microfacet.alpha_glossy(p["roughness"], p["anisotropy"]))
+            color = np.clip(p["color"], 0, None)
+            lobes.append(GlossyLobe(c.weight.copy(), ax, ay,
+                                    lambda n, color=color: fresnel_model.ConstantFresnel(
+                                        np.broadcast_to(color, (n, 3))),
+                                    multiscatter))
+        elif c.kind == "metallic":
+            ax, ay = (float(v) for v in microfacet.alpha_glossy(p["roughness"], p["anisotropy"]))
+            if p["physical"]:
+                make = (lambda n, ior=p["ior"], k=p["extinction"]:
+                        fresnel_model.ConductorFresnel(np.broadcast_to(ior, (n, 3)),
+                                                       np.broadcast_to(k, (n, 3))))
+            else:
+                make = (lambda n, f0=np.clip(p["base_color"], 0, 1),
+                        tint=np.clip(p["edge_tint"], 0, 1):
+                        fresnel_model.F82TintFresnel(np.broadcast_to(f0, (n, 3)), tint))
+            lobes.append(GlossyLobe(c.weight.copy(), ax, ay, make, multiscatter))
+    if not lobes:
+        return None
+    return GlossyMaterial(lobes, layer)

@@ -75,11 +75,16 @@ def irradiance_from_terms(terms, count: int) -> np.ndarray:
 def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.random.Generator,
                  light_samples: int = 4, stats: dict | None = None,
                  offset_normals: np.ndarray | None = None, ray_log: list | None = None,
-                 shadow_map=None) -> list:
+                 shadow_map=None, with_directions: bool = False) -> list:
     """Irradiance as a list of terms (target, scalar, rgb): term i adds ``scalar * rgb`` to
     points ``target`` (None: every point, in order). Callers that weight the irradiance per
     point (albedo, pixel) can then do so on scalars instead of (N, 3) arrays.
-    ``shadow_map``: a ``ShadowPhotonMap``; None traces every shadow ray (module docstring)."""
+    ``shadow_map``: a ``ShadowPhotonMap``; None traces every shadow ray (module docstring).
+    ``with_directions``: terms are (target, scalar, rgb, directions, hittable) instead, with
+    each sample's unit direction to the light (rows of ``scalar``) and what a ray could hit
+    of the light (``"mesh"`` for an emissive mesh, ``"world"``, ``""`` for lights that are
+    not geometry), for BSDFs other than Lambert's: a sample's radiance towards wo is then
+    f(wo, direction) x scalar x rgb."""
     count = len(x)
     if count == 0 or lights.empty:
         return []
@@ -95,10 +100,10 @@ def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.
         if tally is not None:
             tally["plain"] += int(live.sum())
         if live.all():
-            groups.append((None, w, dist, weight, rgb, False))
+            groups.append((None, w, dist, weight, rgb, False, ""))
         elif live.any():
             idx = np.nonzero(live)[0]
-            groups.append((idx, w[idx], dist[idx], weight[idx], rgb, False))
+            groups.append((idx, w[idx], dist[idx], weight[idx], rgb, False, ""))
 
     # Sampled lights: K stratified samples per point, light chosen by estimated contribution.
     if lights.sampled and light_samples > 0:
@@ -129,11 +134,11 @@ def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.
                 tally["plain"] += int(live.sum())
             if live.any():
                 groups.append((pts[live], w[live], dist[live], weight[live], light.rgb,
-                               getattr(light, 'in_bvh', False)))
+                               getattr(light, 'in_bvh', False), _hittable(light)))
 
     if not groups:
         _count_classes(stats, tally, 0)
-        return unshadowed
+        return unshadowed if with_directions else [t[:3] for t in unshadowed]
     single = len(groups) == 1 and groups[0][0] is None
     if single:
         target = None
@@ -190,13 +195,22 @@ def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.
     offset = 0
     for group in groups:
         size = len(group[2])
-        terms.append((group[0], group[3] * visible[offset:offset + size], group[4]))
+        term = (group[0], group[3] * visible[offset:offset + size], group[4])
+        terms.append(term + (group[1], group[6]) if with_directions else term)
         offset += size
     if stats is not None:
         stats["shadow_rays"] = stats.get("shadow_rays", 0) + len(org)
         stats["trace_seconds"] = stats.get("trace_seconds", 0.0) + traced
     _count_classes(stats, tally, len(org))
-    return terms + unshadowed
+    return terms + (unshadowed if with_directions else [t[:3] for t in unshadowed])
+
+
+def _hittable(light) -> str:
+    """What of the light rays can hit: "mesh" (an emissive mesh, in the BVH), "world", or
+    "" (area lights, suns and delta lights are not geometry)."""
+    if getattr(light, "in_bvh", False):
+        return "mesh"
+    return "world" if getattr(light, "kind", "") == "world" else ""
 
 
 def _count_classes(stats, tally, traced):
@@ -214,6 +228,7 @@ def _classified_samples(groups, unshadowed, tally, shadow_map, li, light, x, n, 
     """The samples of sampled light ``li`` at points ``pts`` (sorted), by their pair's class:
     LIT terms go to ``unshadowed``, PENUMBRA samples (M per original) to ``groups``."""
     in_bvh = getattr(light, "in_bvh", False)
+    hittable = _hittable(light)
     tally["plain"] += int(live.sum())
     # One class per (point, light): pts is sorted, so its distinct values are runs.
     first = np.empty(len(pts), bool)
@@ -237,10 +252,10 @@ def _classified_samples(groups, unshadowed, tally, shadow_map, li, light, x, n, 
         trace = below & ~near
         keep = ~below & ~near
         if keep.any():
-            unshadowed.append((p[keep], weight[lit[keep]], light.rgb))
+            unshadowed.append((p[keep], weight[lit[keep]], light.rgb, w[lit[keep]], hittable))
         if trace.any():
             t = lit[trace]
-            groups.append((pts[t], w[t], dist[t], weight[t], light.rgb, in_bvh))
+            groups.append((pts[t], w[t], dist[t], weight[t], light.rgb, in_bvh, hittable))
     # UMBRA: no light, no ray. PENUMBRA: every sample of the pair (live or not: the class
     # must not depend on the sample's numbers) becomes M fresh stratified samples.
     pen = np.flatnonzero(cls == PENUMBRA)
@@ -250,7 +265,7 @@ def _classified_samples(groups, unshadowed, tally, shadow_map, li, light, x, n, 
     if m == 1:
         t = pen[live[pen]]
         if len(t):
-            groups.append((pts[t], w[t], dist[t], weight[t], light.rgb, in_bvh))
+            groups.append((pts[t], w[t], dist[t], weight[t], light.rgb, in_bvh, hittable))
         return
     p = np.repeat(pts[pen], m)
     u = sampling.stratified_2d(len(pen), m, rng).reshape(-1, 2)
@@ -258,4 +273,4 @@ def _classified_samples(groups, unshadowed, tally, shadow_map, li, light, x, n, 
     weight_m = weight_m / (np.repeat(p_sel[pen], m) * (k * m))
     ok = (weight_m > 0) & np.isfinite(weight_m)
     if ok.any():
-        groups.append((p[ok], w_m[ok], dist_m[ok], weight_m[ok], light.rgb, in_bvh))
+        groups.append((p[ok], w_m[ok], dist_m[ok], weight_m[ok], light.rgb, in_bvh, hittable))

@@ -83,7 +83,8 @@ class RenderReport:
         seconds = camera.seconds
         self.stage("camera", seconds, batches=camera.batches, batches_done=camera.done,
                    camera_rays=t["camera_rays"], shadow_rays=t["shadow_rays"],
-                   specular_rays=t["specular_rays"],
+                   specular_rays=t["specular_rays"], glossy_rays=t["glossy_rays"],
+                   paths_cut_at_max_depth=t["paths_cut"],
                    trace_thread_seconds=round(t["trace_seconds"], 6),
                    photon_queries=t["queries"],
                    photon_query_thread_seconds=round(t["query_seconds"], 6),

@@ -22,10 +22,12 @@ closure        seed material (weight w multiplies each line)
 =============  ================================================================================
 principled     rho_d = Base Color (1 - Metallic)(1 - Transmission); rho_s = Base Color x
                Metallic as a mirror (roughness, the dielectric specular layer, coat, sheen,
-               transmission, thin film, alpha: reported when they matter)
-diffuse        rho_d = Color (Roughness > 0, Oren-Nayar, reported)
-glossy         rho_s = Color, a mirror (Roughness > 0.1 reported)
-metallic       rho_s = Base Color (F82) or ((n-1)^2 + k^2) / ((n+1)^2 + k^2) (physical), a mirror
+               transmission, thin film, alpha: reported when they matter). Camera paths
+               render the metal and the specular layer as GGX lobes (``bsdf.glossy_material``)
+diffuse        rho_d = Color (Roughness > 0, Oren-Nayar, is reported and rendered Lambertian)
+glossy         rho_s = Color, a mirror (Roughness > 0.1 reported); camera paths: GGX
+metallic       rho_s = Base Color (F82) or ((n-1)^2 + k^2) / ((n+1)^2 + k^2) (physical), a
+               mirror; camera paths: GGX with the F82-tint or conductor Fresnel
 glass,         rho_s = Color x ((IOR - 1) / (IOR + 1))^2, the normal-incidence reflection as a
 refraction     mirror; the refraction is lost (reported)
 transparent,   black (reported)
@@ -152,8 +154,11 @@ def _principled(c: Closure, note):
     specular = base * metallic
     exitance = math.pi * p["emission"]
     if metallic > 0 and p["roughness"] > _MIRROR_ROUGHNESS:
-        note(f"metallic part of {name} (Roughness {_fmt(p['roughness'])}) is rendered as a "
-             "perfect mirror")
+        note(f"metallic part of {name} (Roughness {_fmt(p['roughness'])}): camera paths "
+             "render its GGX lobe; photons and the final gather treat it as a perfect mirror")
+    if metallic < 1 and transmission < 1 and p["specular_ior_level"] > 0 and p["ior"] != 1:
+        note(f"specular layer of {name}: camera paths render it; photons and the final "
+             "gather leave it out (they see the diffuse base alone)")
     if transmission > 0:
         note(f"Transmission {_fmt(transmission)} of {name} is not supported; the transmitted "
              "light is lost")
@@ -184,6 +189,9 @@ def seed_reduction(closures) -> SeedMaterial:
             d, s, e = _principled(c, note)
         elif c.kind == "diffuse":
             d = p["color"]
+            if p["roughness"] > 0:
+                note(f"Roughness {_fmt(p['roughness'])} of Diffuse BSDF {name} (Oren-Nayar) is "
+                     "rendered as Lambertian")
         elif c.kind == "emission":
             e = math.pi * p["radiance"]
         elif c.kind in ("glossy", "metallic"):
@@ -194,8 +202,8 @@ def seed_reduction(closures) -> SeedMaterial:
                 s = p["base_color"] if c.kind == "metallic" else p["color"]
             if p["roughness"] > _MIRROR_ROUGHNESS:
                 label = "Metallic BSDF" if c.kind == "metallic" else "Glossy BSDF"
-                note(f"{label} {name} (Roughness {_fmt(p['roughness'])}) is rendered as a "
-                     "perfect mirror")
+                note(f"{label} {name} (Roughness {_fmt(p['roughness'])}): camera paths render "
+                     "its GGX lobe; photons and the final gather treat it as a perfect mirror")
         elif c.kind in ("glass", "refraction"):
             f0 = _f0(p["ior"])
             label = "Glass BSDF" if c.kind == "glass" else "Refraction BSDF"
