@@ -10,7 +10,11 @@ time against closed forms; these tests pin what it averages away:
   ray (light through an occluder, equal bit for bit to the unoccluded scene with the same
   random numbers), UMBRA gives exactly 0, PENUMBRA with M = 1 is the plain call, M = 2
   traces twice the rays and stays unbiased (5 standard errors), samples below the geometric
-  surface are traced even when LIT.
+  surface are traced even when LIT; next to delta lights, the ray counts (saved, traced,
+  summed over calls) are exact; an emissive mesh in penumbra with M = 1 traces the plain
+  call's rays bit for bit; a single penumbra sample becomes M;
+* a hard sun on points partly facing away (the index path of delta lights), samples of a
+  light behind the surface (no ray).
 """
 import numpy as np
 import pytest
@@ -255,3 +259,79 @@ def test_emitter_that_is_geometry_is_not_its_own_shadow():
     hidden = direct_irradiance(np.array([[3.0, 0.0, 0.0]]), UP[None], lights, accel,
                                sampling.rng_for(7, 9), 8)
     assert np.all(hidden == 0)
+
+
+def test_shadow_map_next_to_delta_lights_counts_every_ray():
+    """Two point lights (traced: one ray per lit point each) and a square light the map calls
+    LIT (no ray): rays saved = the square's samples exactly, rays traced = the point lights'
+    pairs; the irradiance is the plain call's (no occluder), to rounding."""
+    a = PointLight("A", [0.0, 0.0, 3.0], [100.0, 50.0, 20.0])
+    b = PointLight("B", [3.0, 0.0, 1.0], [10.0, 10.0, 40.0])
+    q = _square("Q", [0.0, 0.0, 3.0], 0.5, 100.0)
+    scene, accel, lights = _scene([a, b, q])
+    x = np.array([[0.1, 0.2, 0.0], [0.3, -0.2, 0.0], [2.5, 0.0, 0.0], [-1.0, 1.0, 0.0]])
+    n = np.tile(UP, (4, 1))
+    st = {}
+    lit = _Classes(lambda p: np.full(len(p), LIT))
+    e = direct_irradiance(x, n, lights, accel, sampling.rng_for(2, 9), 4, stats=st, shadow_map=lit)
+    plain = direct_irradiance(x, n, lights, accel, sampling.rng_for(2, 9), 4)
+    np.testing.assert_allclose(e, plain, rtol=1e-12)
+    assert st["shadow_rays"] == 8 and st["shadow_rays_saved"] == 16
+    assert (st["shadow_lit"], st["shadow_umbra"], st["shadow_penumbra"]) == (4, 0, 0)
+    direct_irradiance(x, n, lights, accel, sampling.rng_for(2, 9), 4, stats=st, shadow_map=lit)
+    assert st["shadow_rays"] == 16 and st["shadow_rays_saved"] == 32     # summed over calls
+    assert (st["shadow_lit"], st["shadow_umbra"], st["shadow_penumbra"]) == (8, 0, 0)
+
+
+def test_hard_sun_on_points_partly_facing_away():
+    """A hard sun straight down (3 W/m^2): a point under the plate gets 0, an open point facing
+    up 3 exactly, a point facing down nothing and no ray (two rays in all)."""
+    from lanterna.engine.scene import SunLight
+    sun = SunLight("Sun", [0.0, 0.0, -1.0], [3.0, 3.0, 3.0])
+    scene, accel, lights = _scene([sun], [PLATE])
+    x = np.array([[0.2, 0.1, 0.0], [3.0, 1.0, 0.0], [2.0, 2.0, 0.0]])
+    n = np.array([UP, UP, -UP])
+    st = {}
+    e = direct_irradiance(x, n, lights, accel, np.random.default_rng(0), stats=st)
+    np.testing.assert_allclose(e, [[0.0] * 3, [3.0] * 3, [0.0] * 3], rtol=1e-12, atol=0)
+    assert st["shadow_rays"] == 2
+
+
+def test_samples_of_a_light_behind_the_surface_trace_no_ray():
+    """Points facing away from a square light: every sample weighs 0, nothing is traced."""
+    scene, accel, lights = _scene([_square("Q", [0.0, 0.0, 3.0], 0.5, 100.0)])
+    st = {}
+    e = direct_irradiance(np.zeros((3, 3)), np.tile(-UP, (3, 1)), lights, accel,
+                          sampling.rng_for(1, 9), 4, stats=st)
+    assert np.all(e == 0) and st.get("shadow_rays", 0) == 0
+
+
+def test_penumbra_of_an_emissive_mesh_traces_the_plain_rays():
+    """PENUMBRA with M = 1 on a light that is geometry (an emissive quad in the BVH): the
+    shadow rays are the plain call's, aimed at the sampled points, bit for bit."""
+    tris = np.concatenate([quad([0, 0, 0], [5.0, 0, 0], [0, 5.0, 0]),
+                           quad([0, 0, 1.0], [0.3, 0, 0], [0, 0.3, 0])]).astype(np.float32)
+    scene = Scene(triangles=tris, material_ids=np.array([0, 0, 1, 1], np.int32),
+                  materials=[Material("white"), Material("glow", diffuse=0.0, exitance=20.0)],
+                  camera=Camera.look_at([0, -6, 4], [0, 0, 0])).validate()
+    accel, lights = Accelerator(scene.triangles, threads=1), LightSet(scene)
+    x = np.array([[0.0, 0.0, 0.0], [0.5, 0.2, 0.0], [1.5, -0.5, 0.0]])
+    n = np.tile(UP, (3, 1))
+    log, plain_log = [], []
+    one = _Classes(lambda p: np.full(len(p), PENUMBRA), factor=1)
+    e = direct_irradiance(x, n, lights, accel, sampling.rng_for(3, 9), 4, ray_log=log, shadow_map=one)
+    plain = direct_irradiance(x, n, lights, accel, sampling.rng_for(3, 9), 4, ray_log=plain_log)
+    np.testing.assert_array_equal(e, plain)
+    for got, want in zip(log[0][1:], plain_log[0][1:]):
+        np.testing.assert_array_equal(got, want)
+
+
+def test_a_single_penumbra_sample_becomes_m_samples():
+    """One point, one light sample, PENUMBRA with M = 3: three rays, and the open point gets
+    light."""
+    scene, accel, lights = _scene([_square("Q", [0.0, 0.0, 3.0], 0.5, 100.0)])
+    three = _Classes(lambda p: np.full(len(p), PENUMBRA), factor=3)
+    st = {}
+    e = direct_irradiance(np.zeros((1, 3)), UP[None], lights, accel, sampling.rng_for(4, 9), 1,
+                          stats=st, shadow_map=three)
+    assert st["shadow_rays"] == 3 and st["shadow_penumbra"] == 1 and np.all(e > 0)
