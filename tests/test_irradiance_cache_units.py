@@ -357,3 +357,62 @@ def test_stats_fields():
 def test_pairs_from_ranges():
     row, pos = IC._pairs_from_ranges(np.array([5, 0, 9]), np.array([2, 0, 3]))
     assert row.tolist() == [0, 0, 2, 2, 2] and pos.tolist() == [5, 6, 9, 10, 11]
+
+
+def test_harmonic_mean_over_the_hits_of_each_point_alone():
+    """Two gathers without a miss, over the hits only: each point's R is its own harmonic mean
+    (4 strata / sum of 1/r), not a count pooled over the points."""
+    r = np.array([[[1.0, 2.0], [4.0, 4.0]], [[3.0, 3.0], [3.0, 3.0]]])
+    frames = frames_from_normals(np.tile(UP, (2, 1)))
+    g = irradiance_and_gradients(np.ones((2, 2, 2, 3)), r, 2, 2, frames, misses_count=False)
+    np.testing.assert_allclose(g.radius, [4 / 2.0, 3.0], rtol=1e-12)
+
+
+def test_records_with_tilted_normals_serve_their_own_points():
+    """Records on tilted surfaces (every normal component non-zero), each asked at its own
+    position with its own normal: error 0 (w = 1 / e_min), the record's value exactly; a
+    point whose normal faces away from the record's (n . n_i = -0.54) is not served."""
+    n1 = np.array([0.48, 0.6, 0.64])
+    n2 = np.array([-0.6, -0.48, 0.64])
+    c = IrradianceCache(channels=1)
+    c.add([[0.0, 0, 0], [5.0, 0, 0]], [n1, n2], [[2.0], [7.0]], [1.0, 1.0])
+    E, cov, ws, cnt = c.interpolate([[0.0, 0, 0], [5.0, 0, 0]], [n1, n2], 0.3)
+    np.testing.assert_allclose(E[:, 0], [2.0, 7.0], rtol=1e-12)
+    assert cov.all() and cnt.tolist() == [1, 1]
+    np.testing.assert_allclose(ws, 1.0 / c.e_min, rtol=1e-9)
+    away = np.array([0.48, -0.6, -0.64])                  # n1 . away = 0.2304 - 0.36 - 0.4096
+    E, cov, _ws, _cnt = c.interpolate([[0.0, 0, 0]], [away], 0.3)
+    assert not cov.any() and E[0, 0] == 0
+
+
+def test_value_problems_name_each_damaged_field():
+    """Saved records with non-finite positions and gradients, a negative irradiance, a zero
+    radius, a negative usage count: each is named, in order; sound records give none."""
+    c = IrradianceCache(channels=3)
+    c.add([[0.0, 0, 0], [1.0, 0, 0]], [UP, UP], [[1.0] * 3, [2.0] * 3], [0.5, 0.5])
+    arrays = c.to_arrays()
+    assert IrradianceCache.value_problems(arrays) == []
+    bad = {k: np.array(v, copy=True) for k, v in arrays.items()}
+    bad["positions"][0, 1] = np.nan
+    bad["rot_grad"][1, 0, 2] = np.inf
+    bad["trans_grad"][0, 2, 0] = -np.inf
+    bad["irradiance"][1, 1] = -1.0
+    bad["radius"][0] = 0.0
+    bad["usage"][1] = -3
+    assert IrradianceCache.value_problems(bad) == [
+        "record positions are not finite", "record rot grad are not finite",
+        "record trans grad are not finite", "record irradiance is not finite in [0, 1e30] W/m^2",
+        "record radii are not finite and positive", "record usage counts are negative"]
+
+
+@pytest.mark.parametrize("name, inside, outside", [("channels", (1, 64), (0, 65)),
+                                                   ("radius_ratio", (1.0 + 1e-9, 1e3), (1.0, 1001.0)),
+                                                   ("e_min", (1e-300, 1.0), (0.0, 1.5)),
+                                                   ("cell_fraction", (0.05, 20.0), (0.04, 20.5))])
+def test_options_accept_their_range_and_refuse_the_rest(name, inside, outside):
+    """Each option's bounds are accepted, values just outside and non-finite ones refused."""
+    for value in inside:
+        assert getattr(IrradianceCache(**{name: value}), name) == value
+    for value in (*outside, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match=name):
+            IrradianceCache(**{name: value})
