@@ -455,3 +455,22 @@ def test_emitted_photons_cross_an_occluder():
     assert smap.stats["stored_shadow"] == np.count_nonzero(smap.crossings > 0)
     # Directions kept per photon: every photon travelled downwards.
     assert np.all(decode_directions(smap.directions)[:, 2] < 0)
+
+
+def test_value_problems_name_options_out_of_range():
+    """A sound saved map has no problem; options outside their ranges (or not finite) are
+    each named; the classification's seconds lie within the wall time measured around it."""
+    import time
+    smap = _grid_map(lambda x, y: x > 0, cap=0.5)
+    _with_reps(smap, [0, 5, 9], [LIT, UMBRA, PENUMBRA], [0.1, 0.2, 0.3], lookup_k=3)
+    t0 = time.perf_counter()
+    smap.classify(np.zeros((50, 3)), np.tile([0, 0, 1.0], (50, 1)), 0)
+    wall = time.perf_counter() - t0
+    assert 0 <= smap.stats["classify_seconds"] <= wall
+    arrays = smap.to_arrays()
+    assert ShadowPhotonMap.value_problems(arrays) == []
+    bad = dict(arrays, k=np.array(0), penumbra_factor=np.array(1025), margin=np.array(np.nan),
+               disc=np.array(np.inf))
+    assert ShadowPhotonMap.value_problems(bad) == [
+        "k = 0 is outside [1, 10000]", "penumbra_factor = 1025 is outside [1, 1024]",
+        "margin = nan is outside [0, 1e+06]", "disc = inf is outside [1e-06, 1e+06]"]
