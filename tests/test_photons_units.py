@@ -804,3 +804,18 @@ def test_photon_pass_cancel_keep_and_errors(monkeypatch):
     dim = _scene(FLOOR, [Material("dark", diffuse=1e-9)], lights=[lamp])
     one = build_photon_map(dim, Accelerator(dim.triangles, threads=1), 1)
     assert len(one) == 1 and one.stats["bytes_per_photon"] == 37.0
+
+
+def test_in_crevice_finds_photons_under_an_occluder_closer_than_a_spacing():
+    """Four photons on a 4 x 4 m white floor (spacing sqrt(16 / 4) = 2 m), a black plate
+    0.5 m above the first two and another 3 m above the third: the first two lie in a crevice
+    (0.5 m < the spacing), the third (3 m > the spacing) and the open fourth do not."""
+    near = quad([-1.5, -1.5, 0.5], [0.4, 0, 0], [0, 0.4, 0])          # over (-1.5, -1.5)
+    high = quad([1.0, -1.0, 3.0], [0.4, 0, 0], [0, 0.4, 0])           # over (1, -1), 3 m up
+    mats = [Material("white"), Material("black", diffuse=0.0)]
+    scene = _scene(np.concatenate([FLOOR, near, high]), mats, [0, 0, 1, 1, 1, 1])
+    accel = Accelerator(scene.triangles, threads=1)
+    pmap = _map([[-1.5, -1.5, 0.0], [-1.4, -1.6, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0]],
+                np.ones((4, 3)))
+    assert P.photon_spacing(scene, 4) == pytest.approx(2.0)
+    assert P.in_crevice(scene, accel, pmap).tolist() == [True, True, False, False]
