@@ -474,3 +474,19 @@ def test_value_problems_name_options_out_of_range():
     assert ShadowPhotonMap.value_problems(bad) == [
         "k = 0 is outside [1, 10000]", "penumbra_factor = 1025 is outside [1, 1024]",
         "margin = nan is outside [0, 1e+06]", "disc = inf is outside [1e-06, 1e+06]"]
+
+
+def test_a_dim_light_gets_shadow_photons_and_the_build_times_add_up():
+    """A 0.5 W square light (luminance flux 0.5: dim, not dark) gets every photon and is
+    covered; each phase's seconds lie within the wall time measured around the build."""
+    import time
+    scene = _scene(quad([0, 0, 0], [5, 0, 0], [0, 5, 0]), [_area("Dim", power=0.5)])
+    lights = LightSet(scene)
+    accel = Accelerator(scene.triangles, threads=1)
+    t0 = time.perf_counter()
+    smap = build_shadow_photon_map(scene, accel, lights, 2000, seed=2)
+    wall = time.perf_counter() - t0
+    assert smap.covers(0) and smap.stats["photons_per_light"] == {"Dim": 2000}
+    for key in ("emit_seconds", "trace_seconds", "index_seconds", "representative_seconds",
+                "build_seconds"):
+        assert 0 <= smap.stats[key] <= wall, key
