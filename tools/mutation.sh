@@ -120,6 +120,7 @@ process_isolation = "forkserver"
 
 [tool.pytest.ini_options]
 testpaths = ["tests"]
+$(grep '^filterwarnings' "$ROOT/pyproject.toml")
 TOML
 }
 
