@@ -23,7 +23,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.lanterna-installed
 
-.PHONY: render test test-parity bench clean scenes extension test-compat fuzz
+.PHONY: render test test-parity bench clean scenes extension test-compat fuzz mutation
 
 # Blender versions the add-on is tested against besides .venv's 5.2.3 (make test-compat), each
 # in its own environment .venv-bpyXY with the Python that Blender ships; and the
@@ -98,6 +98,19 @@ test-compat: $(STAMP) $(foreach v,$(COMPAT),.venv-bpy$(v)/.lanterna-installed)
 fuzz: $(STAMP)
 	@mkdir -p out
 	$(PY) tests/fuzz.py --count 420 --csv out/fuzz.csv --work out/fuzz
+
+# Mutation testing of the core modules (issue 19 item 4; mutation/README.md): hours for every
+# mutant on two cores, so not part of `make test`. MUTATION_ARGS: e.g. photons direct.
+MUTATION_VENV := .venv-mut
+$(MUTATION_VENV)/.installed: pyproject.toml
+	$(call need_python,$(PYTHON311),3.11)
+	$(PYTHON311) -m venv $(MUTATION_VENV)
+	$(MUTATION_VENV)/bin/pip install -q -e . pytest==9.2.0 hypothesis==6.170.15 mutmut==3.8.1
+	touch $@
+
+mutation: $(MUTATION_VENV)/.installed
+	tools/mutation.sh --check
+	tools/mutation.sh $(MUTATION_ARGS)
 
 bench: $(STAMP)
 	$(VENV)/bin/lanterna bench
