@@ -22,15 +22,20 @@ from its edges, clear of the 1.5 px Blackman-Harris filter that mixes in the whi
 between tiles). The pixel filter, the sub-pixel jitter and the orthographic rays leave the
 view direction exactly constant over a tile.
 
-Materials: ``POINTS``, one row of tiles each: a Principled BSDF at Blender's defaults
-(Specular IOR Level 0.5, coat roughness 0.03, coat IOR 1.5, Diffuse Roughness 0, ...) except
-Base Color (white (1, 1, 1) unless given), Roughness, IOR, Metallic, Coat Weight and what a
-point names. The white points come out at ~1 (Cycles' layers are energy-conserving, so a
-white base takes what the specular layer leaves); black, grey, orange and copper points
-measure the layers themselves. Cycles settings: those of ``make_cycles_refs.py --gi`` (all bounces, no clamp,
-no denoiser, no adaptive sampling, light threshold 0, path guiding off), ``SAMPLES`` per seed,
-``SEEDS`` independent renders; the standard error of a tile's mean comes from the spread of
-the seeds' tile means (ddof 1) and, as a cross-check, from the per-pixel variance.
+Materials: ``POINTS``, one row of tiles each: a Principled BSDF at Blender's defaults (Specular
+IOR Level 0.5, coat roughness 0.03, coat IOR 1.5, Diffuse Roughness 0, ...) except Base Color
+(white (1, 1, 1) unless given), Roughness, IOR, Metallic, Coat Weight and what a point names.
+The white points come out at ~1 (Cycles' layers are energy-conserving, so a white base takes
+what the specular layer leaves); black, grey, orange and copper points measure the layers
+themselves. Cycles settings: those of ``make_cycles_refs.py --gi`` (all bounces, no clamp, no
+denoiser, no adaptive sampling, light threshold 0, path guiding off), ``SAMPLES`` per seed,
+``SEEDS`` independent renders; the standard error of a tile's mean comes from the spread of the
+seeds' tile means (ddof 1) and, as a cross-check, from the per-pixel variance.
+
+Measured (stored table): 4 seeds x 256 spp, 44 s a render on 2 busy cores, largest relative
+SE 0.035 %; the gaps between tiles read the world at 1.000000; a black base at roughness 0
+gives the exact Fresnel reflectance of IOR 1.5 (0.0400, 0.0509, 0.0892, 0.3389 at cos 1, 0.7,
+0.5, 0.2), a check of the set-up.
 
 Output ``tests/data/cycles_principled_albedo.json``::
 
@@ -224,7 +229,8 @@ def main():
         points.append({"name": name, "inputs": inputs_out, "albedo": alb, "se": se,
                        "se_pixels": se_pix})
         print(f"{name:22s} " + "  ".join(
-            f"{c:.1f}: {a[0]:.4f} {a[1]:.4f} {a[2]:.4f}" for c, a in zip(COS_VIEW, alb)), flush=True)
+            f"{c:.1f}: {a[0]:.4f} {a[1]:.4f} {a[2]:.4f}" for c, a in zip(COS_VIEW, alb)),
+            flush=True)
     table = {
         "blender": bpy.app.version_string, "samples_per_seed": args.samples, "seeds": args.seeds,
         "cos_view": list(COS_VIEW), "pixels_per_tile": (TILE - 2 * MARGIN) ** 2,
