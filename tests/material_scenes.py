@@ -34,8 +34,9 @@ the z axis. 80 x 60 pixels (``RESOLUTION``, blocks of 15 x 20 px).
     with default Base Color 0.8, Emission Color white, Emission Strength
     ``PANEL_STRENGTH`` (10; it emits from both faces, the upper one into the black outside).
     The default cube: 2 m, flat-shaded, the default Principled material (base 0.8), standing
-    on the floor at (0.5, 0.6), turned 30 degrees about z. Camera at (0, -2.8, 1.6) looking at
-    (0, 0.6, 0.9), horizontal FOV 70 degrees; the panel is above the frame. The only light is
+    on the floor at (0.6, 1.0), turned 30 degrees about z. Camera at (-0.2, -2.9, 1.7) looking
+    at (0.2, 0.8, 0.8), horizontal FOV 75 degrees; the panel is above the frame (its corners
+    project to 1.05-1.41 frame heights), the ceiling it lights is in view at the top. The only light is
     the panel (an emissive mesh, sampled by Cycles' light tree).
 
 ``metal_sphere`` (:func:`metal_sphere`)
@@ -55,9 +56,9 @@ the z axis. 80 x 60 pixels (``RESOLUTION``, blocks of 15 x 20 px).
     Multiscatter GGX; roughness 0.2, colour 0.8 (the node's default)): 0.7 diffuse +
     0.3 glossy. A Diffuse box 1 x 1 x 1 m, colour (0.80, 0.30, 0.20), on the floor at
     (0.6, 1.2), turned 20 degrees. Square AREA light 1.2 m, 250 W, 1 cm under the ceiling at
-    (0, 0.3), facing down, ``visible_camera`` off, out of the frame; its glossy reflection in
-    the floor is in view. Camera at (0, -2.8, 1.0) looking at (0, 1.0, 0.45), horizontal FOV
-    60 degrees (the floor reflects the back wall and the box).
+    (0, 1.5), facing down, ``visible_camera`` off, out of the frame; its glossy reflection in
+    the floor is in view (the bright bottom-middle blocks). Camera at (0, -2.8, 1.6) looking
+    at (0, 0.5, 0), horizontal FOV 60 degrees (floor, the box, the back wall's lower part).
 
 ``glass_caustic`` (:func:`glass_caustic`)
     No room: a 12 x 12 m floor at z = 0 (Diffuse BSDF white 0.8, Lambertian), a glass sphere
@@ -67,7 +68,7 @@ the z axis. 80 x 60 pixels (``RESOLUTION``, blocks of 15 x 20 px).
     the sphere's centre at ``SPOT_ELEVATION`` = 30 degrees above the horizontal, from -x: at
     (-1.732, 0, 1.5), aimed at the sphere's centre. The large radius is deliberate: with a
     radius of 0 a path tracer cannot find the caustic at all, and Cycles' noise on it falls
-    as the light's solid angle grows (radius 0.25 m at 3 m left 16 x the variance). The
+    as the light's solid angle grows (radius 0.25 m at 3 m left ~13 x the variance). The
     light refracted by the sphere focuses 1.5 r from its centre, so it lands on the floor
     past the focus, in the sphere's shadow to the +x side: a caustic about 3-15 x brighter
     than the directly lit floor, around (0.9, 0, 0). ``CAUSTIC_REGION`` = (44, 64, 31, 39)
