@@ -48,7 +48,7 @@ from .lobes import MicrofacetReflection, SmoothReflection
 
 __all__ = ["MaterialTable", "SurfaceParams", "Lambertian", "PerfectMirror", "SurfaceBSDF",
            "roulette_probabilities", "reflect", "GlossyLobe", "GlossyMaterial",
-           "glossy_material", "SHARP_ALPHA"]
+           "glossy_material", "sample_glossy", "SHARP_ALPHA"]
 
 # A glossy lobe narrower than this (sqrt(alpha_x alpha_y)) takes the light of emitters it can
 # hit (emissive meshes, the world) from its own sampled rays instead of from light samples:
@@ -368,3 +368,38 @@ def glossy_material(closures) -> GlossyMaterial | None:
     if not lobes:
         return None
     return GlossyMaterial(lobes, layer)
+
+
+def sample_glossy(table: MaterialTable, material_ids, wo, n, rng):
+    """One direction per hit on materials with glossy lobes (``table.glossy``), in the hits'
+    order, grouped by material: a lobe picked in proportion to the largest channel of its
+    weight x albedo(wo), then sampled. Returns (wi (N, 3), weight (N, 3) = w f cos / (pdf P),
+    sharp (N,) whether the picked lobe is sharp). ``wo``, ``n`` (N, 3) float64."""
+    count = len(material_ids)
+    wi_out = np.zeros((count, 3))
+    weight_out = np.zeros((count, 3))
+    sharp_out = np.zeros(count, bool)
+    for material_id in np.unique(material_ids):
+        spec = table.glossy[material_id]
+        hits = np.flatnonzero(material_ids == material_id)
+        if spec is None:
+            continue
+        lobes = [(lobe.weight, lobe.at(len(hits)), lobe.sharp) for lobe in spec.lobes]
+        wo_h, n_h = wo[hits], n[hits]
+        shares = np.stack([(w[None, :] * lobe.albedo(wo_h, n_h)).max(axis=1)
+                           for w, lobe, _ in lobes], axis=1)
+        total = shares.sum(axis=1)
+        cdf = np.cumsum(shares, axis=1) / np.where(total > 0, total, 1.0)[:, None]
+        pick = np.minimum((cdf < rng.random(len(hits))[:, None]).sum(axis=1), len(lobes) - 1)
+        u = rng.random((len(hits), 2))
+        for j, (w, lobe, sharp) in enumerate(lobes):
+            sel = np.flatnonzero((pick == j) & (total > 0))
+            if len(sel) == 0:
+                continue
+            wi, weight, _pdf = lobe.subset(sel).sample(wo_h[sel], n_h[sel], u[sel])
+            at = hits[sel]
+            wi_out[at] = wi
+            weight_out[at] = np.nan_to_num(weight * w[None, :] /
+                                           (shares[sel, j] / total[sel])[:, None])
+            sharp_out[at] = sharp
+    return wi_out, weight_out, sharp_out

@@ -48,6 +48,7 @@ import numpy as np
 
 from . import sampling
 from .camera import pixel_rays
+from .bsdf import sample_glossy
 from .direct import direct_terms, irradiance_from_terms
 from .settings import RenderSettings, camera_blocks
 
@@ -501,6 +502,8 @@ class _GlossyHits:
         self.ending_albedo = np.zeros((count, 3))
         self.goes_on = np.zeros(count, bool)
         self.wo, self.n = wo, n
+        self.materials = materials
+        self.material_ids = surface.material[self.index]
         self.groups = []        # (hits (k,) into the vertex, [(weight (3,), lobe, sharp)])
         if self.count == 0:
             self.continuing = self.index
@@ -523,39 +526,15 @@ class _GlossyHits:
         self.continuing = np.flatnonzero(self.goes_on)
 
     def sample(self, rng):
-        """One ray per glossy hit, in the order of ``index``: a lobe picked in proportion to
-        the largest channel of weight x albedo(wo), sampled; returns (directions, weight =
-        w f cos / (pdf P), kept, collects) where ``collects`` says whether the ray counts the
-        emissive meshes it hits (sharp lobes: see ``bsdf.SHARP_ALPHA``; the world it reaches
-        always counts). From hits where the path ends the ray is an emission probe."""
-        count = self.count
-        out_dirs = np.zeros((count, 3))
-        out_weight = np.zeros((count, 3))
-        collects = np.zeros(count, bool)
-        position = np.full(len(self.mask), -1, np.int64)
-        position[self.index] = np.arange(count)
-        for hits, lobes in self.groups:
-            wo, n = self.wo[hits].astype(np.float64), self.n[hits].astype(np.float64)
-            rows = np.arange(len(hits))
-            shares = np.stack([(w[None, :] * lobe.albedo(wo, n)).max(axis=1)
-                               for w, lobe, _ in lobes], axis=1)          # (k, lobes)
-            total = shares.sum(axis=1)
-            cdf = np.cumsum(shares, axis=1) / np.where(total > 0, total, 1.0)[:, None]
-            u = rng.random(len(hits))
-            pick = np.minimum((cdf < u[:, None]).sum(axis=1), len(lobes) - 1)
-            u2 = rng.random((len(hits), 2))
-            for j, (w, lobe, sharp) in enumerate(lobes):
-                sel = np.flatnonzero((pick == j) & (total > 0))
-                if len(sel) == 0:
-                    continue
-                wi, weight, _pdf = lobe.subset(rows[sel]).sample(wo[sel], n[sel], u2[sel])
-                p = shares[sel, j] / total[sel]
-                at = position[hits[sel]]
-                out_dirs[at] = wi
-                out_weight[at] = np.nan_to_num(weight * w[None, :] / p[:, None])
-                collects[at] = sharp
-        kept = np.any(out_weight > 0, axis=1)
-        return out_dirs, out_weight, kept, collects
+        """One ray per glossy hit, in the order of ``index`` (``bsdf.sample_glossy``):
+        returns (directions, weight = w f cos / (pdf P), kept, collects) where ``collects``
+        says whether the ray counts the emissive meshes it hits (sharp lobes: see
+        ``bsdf.SHARP_ALPHA``; the world it reaches always counts). From hits where the path
+        ends the ray is an emission probe."""
+        wi, weight, sharp = sample_glossy(self.materials, self.material_ids,
+                                          self.wo[self.index].astype(np.float64),
+                                          self.n[self.index].astype(np.float64), rng)
+        return wi, weight, np.any(weight > 0, axis=1), sharp
 
     def _rows(self, hits):
         """Rows of ``hits`` in their material group's lobes (each group's hits are sorted)."""

@@ -13,7 +13,9 @@ What it computes (seed sections 9.1-9.5, corrections in DESIGN.md §4)
         Embree; at each hit Russian roulette (9.2) with Pd, Ps the largest channels of the
         reflectances (``roulette_probabilities``) chooses diffuse / specular / absorb and
         scales the survivor's RGB power by rho / P per channel, so colour stays unbiased and
-        no channel's power grows. Photons are stored at diffuse hits.
+        no channel's power grows. Photons are stored at diffuse hits. A specular pick on a
+        material with glossy lobes samples them (``bsdf.sample_glossy``, GGX) instead of the
+        seed's mirror, the power scaled by the sample's weight / Ps.
         ``max_bounces`` caps the path so a white (rho = 1) enclosure ends. Bookkeeping per
         RGB channel: emitted = absorbed + escaped + capped in expectation, where absorbed
         adds (1 - rho_d - rho_s) x the power of every hit.
@@ -41,7 +43,7 @@ from .accel import offset_distance
 from .lights import LUMINANCE, spot_mask
 from .npzjson import pack_json, unpack_json
 from .scene import MAX_COORDINATE, MAX_VALUE, AreaLight, PointLight, Scene, SpotLight, SunLight
-from .bsdf import MaterialTable
+from .bsdf import MaterialTable, sample_glossy
 from .surfaces import SceneSurfaces
 
 
@@ -535,6 +537,18 @@ def trace_photons(scene: Scene, accel, emitted: EmittedPhotons, rng: np.random.G
                     -d[go_diffuse], n[go_diffuse], rng.random((int(go_diffuse.sum()), 2)))[0]
             new_dir[spec] = lobes.mirror.subset(spec).sample(-d[spec], n[spec])[0]
             scale_s = lobes.mirror.albedo() / np.where(p_s > 0, p_s, 1.0)[:, None]
+            if surfaces.materials.has_glossy:
+                # Materials with glossy lobes (issue 23): the specular pick samples them
+                # (bsdf.sample_glossy) instead of the seed's mirror; power x weight / P_s.
+                params = surface.subset(live)
+                glossy = spec & params.camera_glossy
+                if glossy.any():
+                    g = np.flatnonzero(glossy)
+                    wi, weight, _sharp = sample_glossy(
+                        surfaces.materials, params.material[g], -d[g].astype(np.float64),
+                        n[g].astype(np.float64), rng)
+                    new_dir[g] = wi
+                    scale_s[g] = weight / np.where(p_s[g] > 0, p_s[g], 1.0)[:, None]
             power *= np.where(go_diffuse[:, None], scale_d, scale_s)
             d = new_dir
         o = accel.offset_origins(x, n, d)
