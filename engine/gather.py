@@ -15,7 +15,8 @@ What it computes
         * on a diffuse surface: rho_d / pi * E of the precomputed estimates (direct and
           indirect light of that surface, as the photon map holds both);
         * on a perfect specular surface: the ray is reflected (up to ``max_specular``) with
-          throughput rho_s;
+          throughput rho_s, and the emission of what it then meets is counted (an emitter
+          seen in a mirror lights the gather point indirectly);
         * on an emitter, or into the world: nothing. The emission of meshes and the world's
           radiance are direct light, which ``engine/direct.py`` computes exactly for every
           shading point; counting them here would count them twice.
@@ -255,6 +256,11 @@ def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfa
         facing = np.einsum("ij,ij->i", ng, dirs) > 0
         ng[facing] *= -1                                   # towards the gather ray
         surface = surfaces.params(prim)
+        if bounce > 0 and surfaces.materials.has_emission:
+            # An emitter seen in a mirror is indirect light at the gather point (its direct
+            # light is the emitters it sees straight): counted here, or it was lost.
+            emitted = surface.emitted_radiance * (~facing | surface.both_sides)[:, None]
+            radiance[ray_of] += emitted * throughput
         rho = surface.diffuse_over_pi
         diffuse = np.any(rho > 0, axis=1)
         if diffuse.any():
