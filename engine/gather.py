@@ -44,6 +44,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import sampling
+from .bsdf import sample_glossy
 
 LOOKUP_NEIGHBOURS = 4       # nearest estimates inspected for one with an agreeing normal
 DISC_THICKNESS = 0.25       # a look-up's disc, as the photon estimate's (photons.py)
@@ -274,7 +275,19 @@ def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfa
             break
         idx = np.nonzero(mirror)[0]
         nm = ng[idx]
-        dirs, weight, _pdf = surface.subset(idx).bsdf().mirror.sample(-dirs[idx], nm)
+        incoming = dirs[idx]
+        dirs, weight, _pdf = surface.subset(idx).bsdf().mirror.sample(-incoming, nm)
+        if surfaces.materials.has_glossy:
+            # Materials with glossy lobes (issue 23): sampled (bsdf.sample_glossy), not
+            # mirrored.
+            glossy = np.flatnonzero(surface.camera_glossy[idx])
+            if len(glossy):
+                g_dirs, g_weight, _sharp = sample_glossy(
+                    surfaces.materials, surface.material[idx[glossy]],
+                    -incoming[glossy].astype(np.float64), nm[glossy].astype(np.float64), rng)
+                dirs = dirs.astype(np.float64)
+                weight = weight.astype(np.float64)
+                dirs[glossy], weight[glossy] = g_dirs, g_weight
         origins = accel.offset_origins(x[idx], nm, dirs)
         throughput = weight if throughput is None else throughput[idx] * weight
         ray_of = ray_of[idx]
