@@ -57,7 +57,7 @@ import numpy as np
 
 __all__ = ["dielectric", "conductor", "f82_tint_b", "f82", "f0_from_ior",
            "dielectric_average", "DielectricFresnel", "TintedDielectricFresnel",
-           "F82TintFresnel", "ConductorFresnel", "ConstantFresnel"]
+           "F82TintFresnel", "ConductorFresnel", "ConstantFresnel", "rgb_per_hit"]
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(128)
 
@@ -136,7 +136,7 @@ def dielectric_average(eta):
     return np.array([_dielectric_average_unique(v) for v in values])[inverse].reshape(eta.shape)
 
 
-def _rgb(x, count):
+def rgb_per_hit(x, count):
     """(count, 3) from a scalar, one RGB colour (3,), a per-hit (count,) array (count != 3)
     or a (count, 3) array."""
     x = np.asarray(x, dtype=float)
@@ -175,7 +175,7 @@ class TintedDielectricFresnel:
 
     def __init__(self, eta, f0):
         self.eta = np.asarray(eta, dtype=float)
-        self.f0 = _rgb(f0, len(self.eta))
+        self.f0 = rgb_per_hit(f0, len(self.eta))
 
     def subset(self, index):
         return TintedDielectricFresnel(self.eta[index], self.f0[index])

@@ -122,17 +122,6 @@ def _unit(v):
     return v / np.where(length > 0, length, 1.0)
 
 
-def _rgb(x, count):
-    x = np.asarray(x, dtype=float)
-    if x.ndim == 0:
-        return np.full((count, 3), float(x))
-    if x.shape == (3,):
-        return np.broadcast_to(x, (count, 3)).copy()
-    if x.ndim == 1:
-        return np.repeat(x[:, None], 3, axis=1)
-    return x
-
-
 def _per_hit(x, count, dtype=float):
     return np.broadcast_to(np.asarray(x, dtype=dtype), (count,)).copy()
 
@@ -250,9 +239,9 @@ class MicrofacetGlass:
         self.alpha = np.asarray(alpha, dtype=float)
         count = len(self.alpha)
         self.eta = _per_hit(eta, count)
-        self.reflection_tint = _rgb(reflection_tint, count)
-        self.transmission_tint = _rgb(transmission_tint, count)
-        self.f0 = None if f0 is None else _rgb(f0, count)
+        self.reflection_tint = fresnel_module.rgb_per_hit(reflection_tint, count)
+        self.transmission_tint = fresnel_module.rgb_per_hit(transmission_tint, count)
+        self.f0 = None if f0 is None else fresnel_module.rgb_per_hit(f0, count)
         self.fresnel = _glass_fresnel(self.eta, self.f0)
         self.multiscatter = _per_hit(multiscatter, count, bool)
 
@@ -368,9 +357,9 @@ class SmoothGlass:
     def __init__(self, eta, reflection_tint=1.0, transmission_tint=1.0, f0=None):
         self.eta = np.asarray(eta, dtype=float)
         count = len(self.eta)
-        self.reflection_tint = _rgb(reflection_tint, count)
-        self.transmission_tint = _rgb(transmission_tint, count)
-        self.f0 = None if f0 is None else _rgb(f0, count)
+        self.reflection_tint = fresnel_module.rgb_per_hit(reflection_tint, count)
+        self.transmission_tint = fresnel_module.rgb_per_hit(transmission_tint, count)
+        self.f0 = None if f0 is None else fresnel_module.rgb_per_hit(f0, count)
         self.fresnel = _glass_fresnel(self.eta, self.f0)
 
     def subset(self, index):
