@@ -482,14 +482,15 @@ class _GlossyHits:
 
     Where the glossy lobes reflect more than the diffuse part (largest channel of the summed
     albedos: metals, a Mix floor of more glossy than diffuse) the path goes on by sampling
-    them (``continuing``); elsewhere it ends here (diffuse-dominant, as photon mapping
+    them (``goes_on``); elsewhere it ends here (diffuse-dominant, as photon mapping
     splits transport: Jensen 1996), and the glossy lobes' indirect light is the irradiance
     estimate times their albedo / pi (``ending_albedo``), as if it came evenly; their ray
     still goes one step as an emission probe, for the world and the emitters it meets (their
     direct light), and is not shaded where it lands.
 
-    ``index`` (G,) the glossy hits among the vertex's N hits, ``mask`` (N,), ``continuing``
-    the hits that go on, ``diffuse_factor`` (N,) the share of the diffuse below a Principled
+    ``index`` (G,) the glossy hits among the vertex's N hits, ``mask`` (N,), ``goes_on`` (N,)
+    the hits where the path goes on, ``group_of`` / ``row_of`` (N,) each hit's material group
+    and its row in that group's lobes, ``diffuse_factor`` (N,) the share of the diffuse below a Principled
     specular layer (1 elsewhere), ``ending_albedo`` (N, 3) the glossy albedo at ending hits
     (0 elsewhere)."""
 
@@ -505,12 +506,13 @@ class _GlossyHits:
         self.materials = materials
         self.material_ids = surface.material[self.index]
         self.groups = []        # (hits (k,) into the vertex, [(weight (3,), lobe, sharp)])
-        if self.count == 0:
-            self.continuing = self.index
-            return
-        ids = surface.material[self.index]
+        self.group_of = np.full(count, -1)
+        self.row_of = np.zeros(count, np.int64)
+        ids = self.material_ids
         for material_id in np.unique(ids):
             hits = self.index[ids == material_id]
+            self.group_of[hits] = len(self.groups)
+            self.row_of[hits] = np.arange(len(hits))
             spec = materials.glossy[material_id]
             wo_h, n_h = wo[hits].astype(np.float64), n[hits].astype(np.float64)
             lobes = [(lobe.weight, lobe.at(len(hits)), lobe.sharp) for lobe in spec.lobes]
@@ -523,7 +525,6 @@ class _GlossyHits:
             self.goes_on[hits] = goes_on
             self.ending_albedo[hits] = albedo * ~goes_on[:, None]
             self.groups.append((hits, lobes))
-        self.continuing = np.flatnonzero(self.goes_on)
 
     def sample(self, rng):
         """One ray per glossy hit, in the order of ``index`` (``bsdf.sample_glossy``):
@@ -536,15 +537,6 @@ class _GlossyHits:
                                           self.n[self.index].astype(np.float64), rng)
         return wi, weight, np.any(weight > 0, axis=1), sharp
 
-    def _rows(self, hits):
-        """Rows of ``hits`` in their material group's lobes (each group's hits are sorted)."""
-        rows = np.empty(len(hits), np.int64)
-        for group_hits, _lobes in self.groups:
-            inside = np.isin(hits, group_hits)
-            if inside.any():
-                rows[inside] = np.searchsorted(group_hits, hits[inside])
-        return rows
-
     def radiance(self, target, directions, hittable):
         """f summed over the lobes (k, 3) for light samples of the glossy hits ``target``
         (positions in ``index``) arriving from ``directions``. At hits where the path goes on,
@@ -555,12 +547,10 @@ class _GlossyHits:
         probe (counted at the next hit, not shaded)."""
         f = np.zeros((len(target), 3))
         hit_of = self.index[target]
-        group_of = np.full(len(self.mask), -1)
-        for g, (hits, _lobes) in enumerate(self.groups):
-            group_of[hits] = g
-        rows = self._rows(hit_of)
-        for g, (hits, lobes) in enumerate(self.groups):
-            sel = np.flatnonzero(group_of[hit_of] == g)
+        group = self.group_of[hit_of]
+        rows = self.row_of[hit_of]
+        for g, (_hits, lobes) in enumerate(self.groups):
+            sel = np.flatnonzero(group == g)
             if len(sel) == 0:
                 continue
             wo = self.wo[hit_of[sel]].astype(np.float64)
