@@ -44,10 +44,10 @@ import numpy as np
 from . import fresnel as fresnel_model
 from . import microfacet
 from . import sampling
-from .lobes import MicrofacetReflection, SmoothReflection
+from .lobes import MicrofacetGlass, MicrofacetReflection, SmoothGlass, SmoothReflection
 
 __all__ = ["MaterialTable", "SurfaceParams", "Lambertian", "PerfectMirror", "SurfaceBSDF",
-           "roulette_probabilities", "reflect", "GlossyLobe", "GlossyMaterial",
+           "roulette_probabilities", "reflect", "GlossyLobe", "GlassLobe", "GlossyMaterial",
            "glossy_material", "sample_glossy", "SHARP_ALPHA"]
 
 # A glossy lobe narrower than this (sqrt(alpha_x alpha_y)) takes the light of emitters it can
@@ -95,6 +95,10 @@ class MaterialTable:
         self.glossy = [glossy_material(getattr(m, "closures", ())) for m in scene.materials]
         self.camera_glossy = np.array([g is not None for g in self.glossy], bool)
         self.has_glossy = bool(self.camera_glossy.any())
+        # Materials with a glass lobe (light passes through them).
+        self.transmissive = np.array([g is not None and any(lobe.transmits for lobe in g.lobes)
+                                      for g in self.glossy], bool)
+        self.has_transmission = bool(self.transmissive.any())
         self.exitance = table["exitance"].astype(np.float64)
         self.emitted_radiance = self.exitance / np.pi
         self.both_sides = table["both_sides"]
@@ -261,6 +265,7 @@ class GlossyLobe:
     alpha_y: float
     make_fresnel: object
     multiscatter: bool
+    transmits = False
 
     @property
     def delta(self) -> bool:
@@ -270,12 +275,47 @@ class GlossyLobe:
     def sharp(self) -> bool:
         return self.delta or np.sqrt(self.alpha_x * self.alpha_y) < SHARP_ALPHA
 
-    def at(self, count: int):
+    def at(self, count: int, front=None):
+        """The lobe at ``count`` hits (``front`` is for glass; a reflection ignores it)."""
         fresnel = self.make_fresnel(count)
         if self.delta:
             return SmoothReflection(fresnel)
         return MicrofacetReflection(np.full(count, self.alpha_x), np.full(count, self.alpha_y),
                                     fresnel, multiscatter=self.multiscatter)
+
+
+@dataclass
+class GlassLobe:
+    """A dielectric interface of a material (Glass, Refraction, Principled Transmission):
+    ``weight`` (3,) times a ``MicrofacetGlass`` of width ``alpha`` (``SmoothGlass`` below
+    ``DELTA_ALPHA2``) with index ``ior`` inside over outside: a hit on the front face (the
+    ray arriving from outside) refracts with eta = ior, one on the back face with 1 / ior.
+    ``reflection_tint`` / ``transmission_tint`` (3,) colour the two branches; ``f0`` (3,) is
+    the Principled remap of the Fresnel (None: the exact dielectric). Glass is ``sharp``: it
+    takes the light of the emitters and the world it sees through its own rays, never from
+    light samples (a light behind glass is not reachable by a shadow ray, in Cycles too)."""
+
+    weight: np.ndarray
+    alpha: float
+    ior: float
+    reflection_tint: np.ndarray
+    transmission_tint: np.ndarray
+    f0: np.ndarray | None
+    multiscatter: bool
+    transmits = True
+    sharp = True
+
+    @property
+    def delta(self) -> bool:
+        return self.alpha * self.alpha < DELTA_ALPHA2
+
+    def at(self, count: int, front=None):
+        eta = np.full(count, float(self.ior)) if front is None else \
+            np.where(np.asarray(front, bool), float(self.ior), 1.0 / float(self.ior))
+        if self.delta:
+            return SmoothGlass(eta, self.reflection_tint, self.transmission_tint, self.f0)
+        return MicrofacetGlass(np.full(count, float(self.alpha)), eta, self.reflection_tint,
+                               self.transmission_tint, self.f0, multiscatter=self.multiscatter)
 
 
 @dataclass
@@ -297,9 +337,9 @@ class GlossyMaterial:
 
 
 def _principled_lobes(c, lobes):
-    """Cycles' Principled stack (``svm/closure.h``): metal (F82 tint), then the dielectric
-    specular layer over the diffuse; returns the layer (sheen, coat, transmission and alpha
-    are not rendered by camera paths yet: export names them)."""
+    """Cycles' Principled stack (``svm/closure.h``): metal (F82 tint), transmission (glass),
+    then the dielectric specular layer over the diffuse; returns the layer (sheen, coat and
+    alpha are not rendered yet: export names them)."""
     p, weight = c.params, c.weight.copy()
     multiscatter = c.distribution in ("MULTI_GGX", "")
     ax, ay = (float(v) for v in microfacet.alpha_principled(p["roughness"], p["anisotropic"]))
@@ -312,7 +352,6 @@ def _principled_lobes(c, lobes):
                                     np.broadcast_to(f0, (n, 3)), tint),
                                 multiscatter))
         weight = weight * (1 - metallic)
-    weight = weight * (1 - float(np.clip(p["transmission"], 0, 1)))
     ior = max(float(p["ior"]), 1e-5)
     f0 = float(fresnel_model.f0_from_ior(ior))
     eta = ior
@@ -322,9 +361,20 @@ def _principled_lobes(c, lobes):
         eta = float((1 + root) / (1 - root))
         if ior < 1:
             eta = 1.0 / eta
+    tinted = f0 * np.maximum(p["specular_tint"], 0)
+    transmission = float(np.clip(p["transmission"], 0, 1))
+    if transmission > 0 and np.any(weight > 0):
+        # Cycles' Principled glass: the remapped index, the tinted f0 (only where it differs
+        # from the exact dielectric), the reflection untinted and sqrt(Base Color) on each
+        # crossing of the surface (twice for light through a solid object).
+        plain = p["specular_ior_level"] == 0.5 and np.all(p["specular_tint"] == 1.0)
+        lobes.append(GlassLobe(weight * transmission, float(p["roughness"]) ** 2, max(eta, 1e-5),
+                               np.ones(3), np.sqrt(np.clip(p["base_color"], 0, None)),
+                               None if plain else np.broadcast_to(tinted, (3,)).copy(),
+                               multiscatter))
+    weight = weight * (1 - transmission)
     if eta == 1.0 or not np.any(weight > 0):
         return None
-    tinted = f0 * np.maximum(p["specular_tint"], 0)
     layer = GlossyLobe(weight, ax, ay,
                        lambda n, eta=eta, tinted=tinted: fresnel_model.TintedDielectricFresnel(
                            np.full(n, eta), np.broadcast_to(tinted, (n, 3))),
@@ -334,10 +384,10 @@ def _principled_lobes(c, lobes):
 
 
 def glossy_material(closures) -> GlossyMaterial | None:
-    """The camera's glossy lobes of a material's closures (``engine/shaders.py``): Principled
-    (metal and dielectric layer), Glossy (Fresnel = its colour) and Metallic (F82 tint or the
-    physical conductor) closures; None when there are none. Diffuse, emission, glass and the
-    rest stay with the seed's reduction (``shaders.seed_reduction``)."""
+    """The glossy and glass lobes of a material's closures (``engine/shaders.py``): Principled
+    (metal, transmission and dielectric layer), Glossy (Fresnel = its colour), Metallic (F82
+    tint or the physical conductor), Glass and Refraction closures; None when there are none.
+    Diffuse, emission and the rest stay with the seed's reduction (``shaders.seed_reduction``)."""
     lobes, layer = [], None
     for c in closures:
         if not np.any(c.weight > 0):
@@ -368,16 +418,26 @@ def glossy_material(closures) -> GlossyMaterial | None:
                         tint=np.clip(p["edge_tint"], 0, 1):
                         fresnel_model.F82TintFresnel(np.broadcast_to(f0, (n, 3)), tint))
             lobes.append(GlossyLobe(c.weight.copy(), ax, ay, make, multiscatter))
+        elif c.kind in ("glass", "refraction"):
+            # Glass: the colour tints both branches (it is the closure's weight in Cycles);
+            # Refraction: the refracted branch alone, (1 - F) of the light.
+            color = np.clip(p["color"], 0, None)
+            reflection = color if c.kind == "glass" else np.zeros(3)
+            lobes.append(GlassLobe(c.weight.copy(), float(p["roughness"]) ** 2,
+                                   max(float(p["ior"]), 1e-5), reflection, color.copy(), None,
+                                   multiscatter))
     if not lobes:
         return None
     return GlossyMaterial(lobes, layer)
 
 
-def sample_glossy(table: MaterialTable, material_ids, wo, n, rng):
+def sample_glossy(table: MaterialTable, material_ids, wo, n, rng, front=None):
     """One direction per hit on materials with glossy lobes (``table.glossy``), in the hits'
     order, grouped by material: a lobe picked in proportion to the largest channel of its
-    weight x albedo(wo), then sampled. Returns (wi (N, 3), weight (N, 3) = w f cos / (pdf P),
-    sharp (N,) whether the picked lobe is sharp). ``wo``, ``n`` (N, 3) float64."""
+    weight x albedo(wo), then sampled. Returns (wi (N, 3), weight (N, 3) = w f |cos| /
+    (pdf P), sharp (N,) whether the picked lobe is sharp). ``wo``, ``n`` (N, 3) float64, ``n``
+    on wo's side; ``front`` (N,) whether each hit is on the front face (glass refracts into
+    the object there; None: all are)."""
     count = len(material_ids)
     wi_out = np.zeros((count, 3))
     weight_out = np.zeros((count, 3))
@@ -387,14 +447,15 @@ def sample_glossy(table: MaterialTable, material_ids, wo, n, rng):
         hits = np.flatnonzero(material_ids == material_id)
         if spec is None:
             continue
-        lobes = [(lobe.weight, lobe.at(len(hits)), lobe.sharp) for lobe in spec.lobes]
+        side = None if front is None else front[hits]
+        lobes = [(lobe.weight, lobe.at(len(hits), side), lobe.sharp) for lobe in spec.lobes]
         wo_h, n_h = wo[hits], n[hits]
         shares = np.stack([(w[None, :] * lobe.albedo(wo_h, n_h)).max(axis=1)
                            for w, lobe, _ in lobes], axis=1)
         total = shares.sum(axis=1)
         cdf = np.cumsum(shares, axis=1) / np.where(total > 0, total, 1.0)[:, None]
         pick = np.minimum((cdf < rng.random(len(hits))[:, None]).sum(axis=1), len(lobes) - 1)
-        u = rng.random((len(hits), 2))
+        u = rng.random((len(hits), 3))
         for j, (w, lobe, sharp) in enumerate(lobes):
             sel = np.flatnonzero((pick == j) & (total > 0))
             if len(sel) == 0:

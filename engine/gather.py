@@ -186,13 +186,15 @@ def photon_guided_allocation(points, normals, photon_map, m, n, extra, k=GUIDE_P
 def final_gather(points: np.ndarray, normals: np.ndarray, offset_normals: np.ndarray,
                  estimates: RadianceEstimates, accel, surfaces, rng: np.random.Generator,
                  m: int = 8, n: int = 32, max_specular: int = 4, stats: dict | None = None,
-                 guide=None, guide_extra: float = 1.0):
+                 guide=None, guide_extra: float = 1.0, mirrored_emission: bool = True):
     """Indirect irradiance at ``points`` (P, 3) with unit ``normals`` (facing the viewer) by the
     stratified final gather. ``offset_normals``: geometric normals for the ray offset.
     ``surfaces``: the scene's ``surfaces.SceneSurfaces`` (normals and materials at hits; a
     landing point's material is read through ``bsdf``). ``guide``: a photon map whose
     nearby photons steer ``guide_extra`` x M x N extra rays into the strata their light came
     through (``photon_guided_allocation``); None: one ray per stratum.
+    ``mirrored_emission`` False: emitters met after a specular bounce are not counted (the
+    caustic photon map holds that light, light -> specular -> here, when one is built).
 
     Returns (E (P, 3), L (P, M, N, 3), r (P, M, N)): irradiance, per-stratum radiance (the
     mean of its rays) and hit distance of its first ray (inf for a miss). Points are taken in
@@ -202,16 +204,17 @@ def final_gather(points: np.ndarray, normals: np.ndarray, offset_normals: np.nda
     step = max(1, int(GATHER_RAYS_PER_CALL // (m * n * (1.0 + extra))))
     if len(points) <= step:
         return _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfaces,
-                                   rng, m, n, max_specular, stats, guide, guide_extra)
+                                   rng, m, n, max_specular, stats, guide, guide_extra,
+                                   mirrored_emission)
     parts = [_final_gather_chunk(points[a:a + step], normals[a:a + step],
                                  offset_normals[a:a + step], estimates, accel, surfaces, rng, m, n,
-                                 max_specular, stats, guide, guide_extra)
+                                 max_specular, stats, guide, guide_extra, mirrored_emission)
              for a in range(0, len(points), step)]
     return tuple(np.concatenate(columns) for columns in zip(*parts))
 
 
 def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfaces, rng, m, n,
-                        max_specular, stats, guide, guide_extra):
+                        max_specular, stats, guide, guide_extra, mirrored_emission=True):
     count = len(points)
     cells = m * n
     alloc = photon_guided_allocation(points, normals, guide, m, n, guide_extra * cells, rng=rng) \
@@ -257,7 +260,7 @@ def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfa
         facing = np.einsum("ij,ij->i", ng, dirs) > 0
         ng[facing] *= -1                                   # towards the gather ray
         surface = surfaces.params(prim)
-        if bounce > 0 and surfaces.materials.has_emission:
+        if bounce > 0 and mirrored_emission and surfaces.materials.has_emission:
             # An emitter seen in a mirror is indirect light at the gather point (its direct
             # light is the emitters it sees straight): counted here, or it was lost.
             emitted = surface.emitted_radiance * (~facing | surface.both_sides)[:, None]
@@ -284,7 +287,8 @@ def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfa
             if len(glossy):
                 g_dirs, g_weight, _sharp = sample_glossy(
                     surfaces.materials, surface.material[idx[glossy]],
-                    -incoming[glossy].astype(np.float64), nm[glossy].astype(np.float64), rng)
+                    -incoming[glossy].astype(np.float64), nm[glossy].astype(np.float64), rng,
+                    ~facing[idx[glossy]])
                 dirs = dirs.astype(np.float64)
                 weight = weight.astype(np.float64)
                 dirs[glossy], weight[glossy] = g_dirs, g_weight

@@ -79,6 +79,7 @@ class CameraContext:
     track_usage: bool = False      # the Cache usage pass asks for per-pixel shares
     ray_log: list | None = None    # benchmarks: every traced batch of rays
     edges: np.ndarray | None = None   # emitter-edge pixels of the full frame (emitter_edges)
+    caustics: object = None        # indirect.CausticEstimate, or None (no caustic map)
 
 
 @dataclass
@@ -264,7 +265,7 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
 
         glossy = None
         if materials.has_glossy:
-            glossy = _GlossyHits(materials, surface, -d, ns)
+            glossy = _GlossyHits(materials, surface, -d, ns, front)
             if glossy.count == 0:
                 glossy = None
 
@@ -305,6 +306,9 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
                 if depth > 0:
                     e *= thr[ask]
                 add_to_pixels(indirect_sums, rays[ask] // spp, e)
+        if idx is not None and direct_light and context.caustics is not None:
+            _shade_caustics(context, stats, idx, x, ns, surface, glossy, thr, rays, spp,
+                            depth, indirect_sums)
         if idx is not None and direct_light:
             _shade_direct(context, stats, rng, depth, idx, x, ns, ng, surface, thr, rays,
                           pixel_of, direct_sums,
@@ -434,6 +438,29 @@ def edge_emission(context: CameraContext, camera, batch: int, pixels: np.ndarray
     return seen.reshape(len(pixels), m, 3).mean(axis=1), len(origins)
 
 
+def _shade_caustics(context, stats, idx, x, ns, surface, glossy, thr, rays, spp, depth,
+                    indirect_sums):
+    """Caustics at the diffuse hits ``idx``: the caustic map's irradiance (light that reached
+    them through specular surfaces, ``indirect.CausticEstimate``) x rho_d / pi (below a
+    Principled layer: x its diffuse share), plus, at glossy hits where the path ends, x their
+    glossy albedo / pi; summed into the Indirect part."""
+    ask = idx if isinstance(idx, np.ndarray) else np.arange(len(x))
+    t0 = time.perf_counter()
+    e = context.caustics.irradiance(x[ask], ns[ask], stats)
+    stats["estimate_seconds"] += time.perf_counter() - t0
+    lit = np.flatnonzero(np.any(e > 0, axis=1))
+    if len(lit) == 0:
+        return
+    at, e = ask[lit], e[lit]
+    value = e * surface.diffuse_over_pi[at]
+    if glossy is not None:
+        value *= glossy.diffuse_factor[at][:, None]
+        value += glossy.ending_albedo[at] * e / np.pi
+    if depth > 0:
+        value *= thr[at]
+    add_to_pixels(indirect_sums, rays[at] // spp, value)
+
+
 def _shade_direct(context, stats, rng, depth, idx, x, ns, ng, surface, thr, rays, pixel_of,
                   direct_sums, diffuse_factor=None):
     """Direct light at the diffuse hits ``idx``: rho_d / pi times the irradiance of
@@ -494,8 +521,9 @@ class _GlossyHits:
     specular layer (1 elsewhere), ``ending_albedo`` (N, 3) the glossy albedo at ending hits
     (0 elsewhere)."""
 
-    def __init__(self, materials, surface, wo, n):
+    def __init__(self, materials, surface, wo, n, front=None):
         count = len(surface)
+        self.front = np.ones(count, bool) if front is None else np.asarray(front, bool)
         self.mask = surface.camera_glossy
         self.index = np.flatnonzero(self.mask)
         self.count = len(self.index)
@@ -515,7 +543,8 @@ class _GlossyHits:
             self.row_of[hits] = np.arange(len(hits))
             spec = materials.glossy[material_id]
             wo_h, n_h = wo[hits].astype(np.float64), n[hits].astype(np.float64)
-            lobes = [(lobe.weight, lobe.at(len(hits)), lobe.sharp) for lobe in spec.lobes]
+            lobes = [(lobe.weight, lobe.at(len(hits), self.front[hits]), lobe.sharp)
+                     for lobe in spec.lobes]
             if spec.layer is not None:
                 self.diffuse_factor[hits] = spec.diffuse_factor(wo_h, n_h)
             albedo = sum(w[None, :] * lobe.albedo(wo_h, n_h) for w, lobe, _ in lobes)
@@ -534,7 +563,8 @@ class _GlossyHits:
         ends the ray is an emission probe."""
         wi, weight, sharp = sample_glossy(self.materials, self.material_ids,
                                           self.wo[self.index].astype(np.float64),
-                                          self.n[self.index].astype(np.float64), rng)
+                                          self.n[self.index].astype(np.float64), rng,
+                                          self.front[self.index])
         return wi, weight, np.any(weight > 0, axis=1), sharp
 
     def radiance(self, target, directions, hittable):

@@ -21,7 +21,7 @@ The flow (DESIGN.md §1), each stage in its own module:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -60,10 +60,13 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
     report.data["estimate"] = estimate
     report.data["warnings"].extend(estimate.get("warnings", ()))
     try:
-        context = CameraContext(scene, maps.surfaces, maps.accel, maps.lights, settings,
+        # The camera follows the plan's specular depth (raised where glass is present).
+        camera_settings = replace(settings, max_specular_depth=maps.plan.specular_depth) \
+            if maps.plan is not None else settings
+        context = CameraContext(scene, maps.surfaces, maps.accel, maps.lights, camera_settings,
                                 indirect=maps.indirect, shadow_map=maps.shadow_map,
                                 track_usage="CacheUsage" in wanted and maps.cache is not None,
-                                ray_log=ray_log)
+                                ray_log=ray_log, caustics=maps.caustics)
         camera = render_camera(context, wanted, maps.pool, progress, cancelled,     # 9
                                skip=maps.cancelled)
         report.camera_entry(camera)

@@ -31,9 +31,11 @@ import numpy as np
 from .accel import Accelerator
 from .artifacts import Artifacts, scene_fingerprint
 from .gather import RadianceEstimates
-from .indirect import CachedIndirect, FinalGather, PhotonEstimate, place_cache
+from .indirect import CachedIndirect, CausticEstimate, FinalGather, PhotonEstimate, place_cache
 from .lights import LightSet
-from .photons import auto_max_radius, auto_photon_count, build_photon_map
+from .photons import (CAUSTIC_PILOT, auto_caustic_stored, auto_max_radius, auto_photon_count,
+                      build_caustic_map, build_photon_map, caustic_emission_count,
+                      specular_share)
 from .plan import Plan, make_plan
 from .report import RenderReport
 from .scene import Scene, SceneError
@@ -58,6 +60,7 @@ class Prepared:
     indirect: object = None            # the camera's estimator (engine/indirect.py)
     cache: object = None               # irradiance_cache.IrradianceCache
     shadow_map: object = None          # shadow_photons.ShadowPhotonMap
+    caustics: object = None            # indirect.CausticEstimate (the caustic map), or None
     radius: float | None = None        # the photon estimate's radius cap [m]
     cone: float | None = None          # the cone filter's k, None without it
     cancelled: bool = False
@@ -117,6 +120,10 @@ def prepare(scene: Scene, settings: RenderSettings, progress, cancelled,
         prep.plan = plan = make_plan(scene, settings, lights, surfaces.materials)
         report.data["plan"] = {"mode": settings.mode, "indirect": settings.indirect,
                                "stages": plan.to_report(), "summary": plan.summary()}
+        if plan["caustics"]:
+            _caustics(prep, scene, settings, tell, cancelled)                # 5a
+            report.data["plan"]["stages"] = plan.to_report()
+            report.data["plan"]["summary"] = plan.summary()
         if plan["photons"]:
             _photons(prep, scene, settings, tell, cancelled, artifacts)      # 5-7
         prep.cancelled = bool(prep.photon_map is not None
@@ -127,6 +134,38 @@ def prepare(scene: Scene, settings: RenderSettings, progress, cancelled,
         prep.close()
         raise
     return prep
+
+
+def _caustics(prep: Prepared, scene, settings, tell, cancelled):
+    """Stage 5a: the caustic photon map where the lights' photons meet specular surfaces
+    first: a pilot measures the share that does (``photons.specular_share``), which sets the
+    photons emitted for ``auto_caustic_stored`` of them to reach a specular surface; the
+    estimate's radius follows the map's own density (``build_caustic_map``)."""
+    report, plan = prep.report, prep.plan
+    t0 = time.perf_counter()
+    share = specular_share(scene, prep.accel, settings.seed, surfaces=prep.surfaces)
+    if not share > 0:
+        plan.set("caustics", False, f"no light's photons meet a specular or glass surface "
+                                    f"first (a pilot of {CAUSTIC_PILOT:,})")
+        return
+    full_w, full_h = scene.camera.resolution
+    count = caustic_emission_count(auto_caustic_stored(full_w * full_h), share)
+    tell(0.0, f"Caustics: tracing {count:,} photons")
+    cmap = build_caustic_map(scene, prep.accel, count, seed=settings.seed,
+                             max_bounces=settings.bounces, k=settings.photon_k, pool=prep.pool,
+                             progress=lambda f: tell(0.0, f"Caustics: {f:.0%} traced"),
+                             cancelled=cancelled)
+    stats = cmap.stats
+    report.stage("caustics", time.perf_counter() - t0, specular_share=round(share, 6),
+                 emitted=stats["emitted"], stored=stats["stored"], radius=stats["radius"],
+                 bytes=stats["bytes"], cancelled=stats["cancelled"])
+    if not stats["radius"] > 0:
+        plan.set("caustics", False, f"only {stats['stored']} caustic photons stored (the "
+                                    "specular surfaces pass little light to diffuse ones)")
+        return
+    prep.caustics = CausticEstimate(cmap, settings.photon_k, stats["radius"])
+    plan.set("caustics", True, f"{share:.2%} of the lights' photons meet specular or glass "
+                               "surfaces first")
 
 
 def _photons(prep: Prepared, scene, settings, tell, cancelled, artifacts):
@@ -167,7 +206,9 @@ def _photons(prep: Prepared, scene, settings, tell, cancelled, artifacts):
                      estimates=estimates.stats["estimates"],
                      bytes=estimates.stats.get("bytes", 0))
         gather = FinalGather(estimates, prep.accel, prep.surfaces, settings.gather_m,
-                             settings.gather_n, lookups, pmap, settings.gather_guided)
+                             settings.gather_n, lookups, pmap, settings.gather_guided,
+                             max_specular=plan.gather_specular_depth,
+                             mirrored_emission=prep.caustics is None)
         prep.indirect = gather
         if plan["irradiance_cache"]:
             _cache(prep, scene, settings, gather, lookups, tell, cancelled, artifacts)

@@ -21,15 +21,16 @@ that nothing is approximated without a word:
 closure        seed material (weight w multiplies each line)
 =============  ================================================================================
 principled     rho_d = Base Color (1 - Metallic)(1 - Transmission); rho_s = Base Color x
-               Metallic as a mirror (roughness, the dielectric specular layer, coat, sheen,
-               transmission, thin film, alpha: reported when they matter). Camera paths
-               render the metal and the specular layer as GGX lobes (``bsdf.glossy_material``)
+               Metallic as a mirror + sqrt(Base Color)(1 - Metallic) Transmission (roughness,
+               the dielectric specular layer, coat, sheen, thin film, alpha: reported when
+               they matter). Camera paths render the metal and the specular layer as GGX
+               lobes, everything renders the transmission as glass (``bsdf.glossy_material``)
 diffuse        rho_d = Color (Roughness > 0, Oren-Nayar, is reported and rendered Lambertian)
 glossy         rho_s = Color, a mirror (Roughness > 0.1 reported); camera paths: GGX
 metallic       rho_s = Base Color (F82) or ((n-1)^2 + k^2) / ((n+1)^2 + k^2) (physical), a
                mirror; camera paths: GGX with the F82-tint or conductor Fresnel
-glass,         rho_s = Color x ((IOR - 1) / (IOR + 1))^2, the normal-incidence reflection as a
-refraction     mirror; the refraction is lost (reported)
+glass,         rho_s = Color: rendered everywhere (camera, photons, gather) by its glass lobe
+refraction     (``bsdf.GlassLobe``: smooth or GGX dielectric); rho_s is its roulette share
 transparent,   black (reported)
 holdout
 translucent,   rho_d = Color (reported)
@@ -132,11 +133,6 @@ class SeedMaterial:
     notes: list = field(default_factory=list)
 
 
-def _f0(ior: float) -> float:
-    """Fresnel reflectance of a dielectric at normal incidence, ((n - 1) / (n + 1))^2."""
-    return ((ior - 1.0) / (ior + 1.0)) ** 2 if ior > 0 else 0.0
-
-
 def _fmt(value) -> str:
     arr = np.asarray(value, float)
     if arr.ndim == 0:
@@ -151,7 +147,8 @@ def _principled(c: Closure, note):
     transmission = float(np.clip(p["transmission"], 0, 1))
     base = p["base_color"]
     diffuse = base * (1 - metallic) * (1 - transmission)
-    specular = base * metallic
+    # The transmission is a glass lobe (``bsdf.GlassLobe``); here its share of the roulette.
+    specular = base * metallic + (1 - metallic) * transmission * np.sqrt(np.clip(base, 0, None))
     exitance = math.pi * p["emission"]
     if metallic > 0 and p["roughness"] > _MIRROR_ROUGHNESS:
         note(f"metallic part of {name} (Roughness {_fmt(p['roughness'])}): camera paths "
@@ -159,9 +156,9 @@ def _principled(c: Closure, note):
     if metallic < 1 and transmission < 1 and p["specular_ior_level"] > 0 and p["ior"] != 1:
         note(f"specular layer of {name}: camera paths render it; photons and the final "
              "gather leave it out (they see the diffuse base alone)")
-    if transmission > 0:
-        note(f"Transmission {_fmt(transmission)} of {name} is not supported; the transmitted "
-             "light is lost")
+    if transmission > 0 and p["thin_wall"] > 0:
+        note(f"Thin Wall of {name} is ignored: its transmission is rendered as a solid "
+             "glass object's surface")
     if p["coat_weight"] > 0:
         note(f"Coat Weight of {name} is ignored")
     if p["sheen_weight"] > 0:
@@ -205,11 +202,9 @@ def seed_reduction(closures) -> SeedMaterial:
                 note(f"{label} {name} (Roughness {_fmt(p['roughness'])}): camera paths render "
                      "its GGX lobe; photons and the final gather treat it as a perfect mirror")
         elif c.kind in ("glass", "refraction"):
-            f0 = _f0(p["ior"])
-            label = "Glass BSDF" if c.kind == "glass" else "Refraction BSDF"
-            note(f"refraction of {label} {name} is not supported; only its reflection "
-                 f"({_fmt(f0)} at normal incidence) is kept, as a mirror")
-            s = p["color"] * f0
+            # Rendered by its glass lobe (``bsdf.GlassLobe``) everywhere; rho_s is its share
+            # in the photons' roulette and marks it as a surface rays go on from.
+            s = np.asarray(p["color"], np.float64)
         elif c.kind in ("transparent", "holdout"):
             label = "Transparent BSDF" if c.kind == "transparent" else "Holdout"
             note(f"{label} {name} is not supported; rendered black")

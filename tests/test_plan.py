@@ -80,7 +80,7 @@ def test_no_lights_and_bounces_zero_skip_with_reasons():
 def test_unknown_forced_stage_is_refused():
     scene = plane_scene([PointLight("P", [0, 0, 1], [1.0] * 3)])
     with pytest.raises(SceneError, match="force names unknown stages"):
-        render(scene, RenderSettings(samples=1, force="photons,caustics"))
+        render(scene, RenderSettings(samples=1, force="photons,sparkles"))
 
 
 def test_presets_set_their_values():
