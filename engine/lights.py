@@ -7,8 +7,9 @@ What it computes
       rectangles (Blender's area light with Spread ~ 0: the seed's circular directional light,
       Eq. 7.2, E = Phi cos(theta) / (pi r^2) inside the beam);
     * sampled lights, integrated by Monte Carlo: area lights (square, rectangle, disk,
-      ellipse), emissive meshes (seed 3.3.3, 7.1.3), suns with an angular diameter, and a
-      constant world.
+      ellipse), emissive meshes (seed 3.3.3, 7.1.3), suns with an angular diameter, point and
+      spot lights with a radius (``SphereLight``: Cycles 4.x/5.x sphere lights, or its facing
+      disk under Soft Falloff; radiance Phi / (4 pi^2 R^2)), and a constant world.
     Each sampled light gives, for points x with normals n and uniform numbers u, a direction,
     a distance for the shadow ray and a scalar weight: the irradiance estimate before visibility
     is ``weight * light.rgb`` (L cos(theta_x) / pdf(omega) for emitters); plus a cheap unoccluded estimate of its contribution used to share the samples
@@ -24,7 +25,11 @@ Sampling
     Larger meshes choose a triangle by area with ``searchsorted`` on cumulative areas (the
     seed's "area line") and an area-uniform point (DESIGN.md §4). Disks and ellipses are
     sampled by area through the concentric map. Suns with an angle sample their cone
-    uniformly; the world is sampled with cosine-distributed directions (E = pi L V).
+    uniformly; the world is sampled with cosine-distributed directions (E = pi L V). Sphere
+    lights sample the cone they subtend uniformly (the standard sphere-light sampling; Cycles
+    ``point_light_sample``), cosine directions from inside, and their facing disk by area; a
+    spot's mask is evaluated on each sample's direction (``SphereLight``).
+    ``seen_light_radiance`` gives what camera rays after a delta bounce see of sphere lights.
 
 Units: see ``engine/scene.py``. Radiance in W m^-2 sr^-1, irradiance in W m^-2.
 """
