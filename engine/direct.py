@@ -7,7 +7,7 @@ What it computes
 
     * Delta lights (point Eq. 7.1, spot, hard sun, collimated disk Eq. 7.2) cost one shadow
       ray each per point and have no sampling noise.
-    * Sampled lights (area, emissive mesh, soft sun, world) share ``light_samples`` samples per
+    * Sampled lights (area, emissive mesh, soft sun, point / spot with a radius, world) share ``light_samples`` samples per
       point. Each sample first picks a light with probability proportional to its estimated
       unoccluded contribution at that point (``LightSet.selection_weights``), then a point /
       direction on it; the selection number and the 2-D light numbers are stratified over the
@@ -29,8 +29,8 @@ Shadow photons (seed 7.2, 9.6; ``engine/shadow_photons.py``)
     have the same expectation as the one they replace. ``stats`` then also count
     ``shadow_rays_saved`` (the rays a plain call with the same light samples traces, minus the
     rays traced; negative where penumbrae cost more than they save) and ``shadow_lit``,
-    ``shadow_umbra``, ``shadow_penumbra`` (classified pairs). Suns with an angle, the world
-    and delta lights keep plain shadow rays. Without a map the code path, the random numbers
+    ``shadow_umbra``, ``shadow_penumbra`` (classified pairs). Suns with an angle, sphere
+    lights, the world and delta lights keep plain shadow rays. Without a map the code path, the random numbers
     and the results are those of a plain call.
 
 All shadow rays of a call go to Embree in one batch.

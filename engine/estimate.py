@@ -538,7 +538,10 @@ def scene_facts(scene) -> SceneFacts:
     delta, sampled = 0, []
     for light in scene.lights:
         if isinstance(light, (PointLight, SpotLight)):
-            delta += 1
+            if light.radius > 0:           # a sphere light: sampled, no shadow photons
+                sampled.append(("sphere", False, 2.0 * light.radius))
+            else:
+                delta += 1
         elif isinstance(light, SunLight):
             if light.angle > 1e-6:
                 sampled.append(("sun", True, 0.0))

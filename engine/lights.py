@@ -7,8 +7,9 @@ What it computes
       rectangles (Blender's area light with Spread ~ 0: the seed's circular directional light,
       Eq. 7.2, E = Phi cos(theta) / (pi r^2) inside the beam);
     * sampled lights, integrated by Monte Carlo: area lights (square, rectangle, disk,
-      ellipse), emissive meshes (seed 3.3.3, 7.1.3), suns with an angular diameter, and a
-      constant world.
+      ellipse), emissive meshes (seed 3.3.3, 7.1.3), suns with an angular diameter, point and
+      spot lights with a radius (``SphereLight``: Cycles 4.x/5.x sphere lights, or its facing
+      disk under Soft Falloff; radiance Phi / (4 pi^2 R^2)), and a constant world.
     Each sampled light gives, for points x with normals n and uniform numbers u, a direction,
     a distance for the shadow ray and a scalar weight: the irradiance estimate before visibility
     is ``weight * light.rgb`` (L cos(theta_x) / pdf(omega) for emitters); plus a cheap unoccluded estimate of its contribution used to share the samples
@@ -24,7 +25,11 @@ Sampling
     Larger meshes choose a triangle by area with ``searchsorted`` on cumulative areas (the
     seed's "area line") and an area-uniform point (DESIGN.md §4). Disks and ellipses are
     sampled by area through the concentric map. Suns with an angle sample their cone
-    uniformly; the world is sampled with cosine-distributed directions (E = pi L V).
+    uniformly; the world is sampled with cosine-distributed directions (E = pi L V). Sphere
+    lights sample the cone they subtend uniformly (the standard sphere-light sampling; Cycles
+    ``point_light_sample``), cosine directions from inside, and their facing disk by area; a
+    spot's mask is evaluated on each sample's direction (``SphereLight``).
+    ``seen_light_radiance`` gives what camera rays after a delta bounce see of sphere lights.
 
 Units: see ``engine/scene.py``. Radiance in W m^-2 sr^-1, irradiance in W m^-2.
 """
@@ -71,6 +76,22 @@ def spot_mask(cos_axis: np.ndarray, cos_half: float, blend: float) -> np.ndarray
         return (t > 0).astype(np.float64)
     x = np.clip(t / smooth, 0.0, 1.0)
     return x * x * (3.0 - 2.0 * x)
+
+
+def sphere_emission_origins(center, radius: float, directions: np.ndarray,
+                            u: np.ndarray) -> np.ndarray:
+    """Origins (N, 3) on a Lambertian sphere light for photons leaving along unit
+    ``directions`` (N, 3), from uniform numbers ``u`` (N, 2): a uniform point of the disk the
+    sphere projects across each direction (concentric map), lifted onto the hemisphere facing
+    it. With directions uniform over the sphere this is the same ray distribution as an
+    area-uniform point with a cosine direction about the outward normal (the radiance is
+    uniform, so the rays along a direction fill the projected disk evenly), and a spot keeps
+    its cone sampling of directions."""
+    t, b = sampling.orthonormal_basis(directions)
+    disk = sampling.square_to_disk(u)
+    lift = np.sqrt(np.maximum(0.0, 1.0 - _dot(disk, disk)))
+    return np.asarray(center, np.float64) + radius * (disk[:, 0:1] * t + disk[:, 1:2] * b
+                                                      + lift[:, None] * directions)
 
 
 # Spherical triangles -----------------------------------------------------------------------
@@ -294,6 +315,154 @@ class EllipseEmitter:
         return w, dist, weight
 
 
+class SphereLight:
+    """A point or spot light with a radius R > 0 (``PointLight.radius``, ``SpotLight.radius``),
+    as Cycles 4.x/5.x lights it (``kernel/light/point.h``, ``spot.h``; ``scene/light.cpp``).
+
+    Radiance L = Phi / (4 pi^2 R^2) per channel (Cycles: strength / (pi x 4 pi R^2)). Two
+    shapes, Blender's Soft Falloff switch:
+    * sphere (``soft_falloff`` False): a Lambertian sphere, flux Phi. From outside, directions
+      are uniform in the cone the sphere subtends (sin^2 theta_max = R^2 / d^2), estimate
+      L cos(theta_x) 2 pi (1 - cos theta_max); the shadow ray ends on the sphere (law of
+      cosines). From inside (d <= R), as Cycles: cosine directions about the normal, estimate
+      pi L, the ray ends where it leaves the sphere.
+    * facing disk (``soft_falloff`` True, Blender's default): a disk of radius R through the
+      centre, facing the shading point, sampled by area (concentric map), estimate
+      L cos(theta_x) cos(theta_l) pi R^2 / t^2; on its axis E = Phi cos / (4 pi (d^2 + R^2)).
+    A spot multiplies each sample by its cone mask (``spot_mask``) evaluated on that sample's
+    own direction from the light to the point (Cycles ``spot_light_attenuation(-D)``); a
+    sphere spot applies no mask to points inside the sphere.
+    Not geometry: camera paths see it through ``seen_light_radiance``; no shadow photons
+    (``engine/shadow_photons.py`` covers area lights and emissive meshes only), so every
+    shadow ray to it is traced.
+    """
+
+    kind = "sphere"
+    in_bvh = False
+    shadow_photons = False
+
+    def __init__(self, light):
+        self.name = light.name
+        self.center = np.asarray(light.position, np.float64)
+        self.radius = float(light.radius)
+        self.sphere = not light.soft_falloff
+        self.power = np.asarray(light.flux, np.float64)
+        self.rgb = self.power / (4.0 * np.pi ** 2 * self.radius ** 2)
+        if isinstance(light, SpotLight):
+            self.axis = np.asarray(light.direction, np.float64)
+            self.cos_half = float(np.cos(light.half_angle))
+            self.blend = light.blend
+        else:
+            self.axis = None
+
+    def mask(self, travel: np.ndarray) -> np.ndarray:
+        """The spot cone for unit directions of travel from the light (N, 3); 1 for a point."""
+        if self.axis is None:
+            return np.ones(len(travel))
+        return spot_mask(travel @ self.axis, self.cos_half, self.blend)
+
+    def selection_weight(self, x, n):
+        d = self.center - x
+        r2 = np.maximum(_dot(d, d), 1e-300)
+        r = np.sqrt(r2)
+        cos_x = np.maximum(_dot(n, d) / r, 0.0)
+        # Unoccluded irradiance of a point light of the same flux, capped by pi L inside;
+        # a spot's mask on the centre's direction, floored (the sphere reaches past the cone).
+        e = np.minimum((self.power @ LUMINANCE) / (4 * np.pi * r2), np.pi * (self.rgb @ LUMINANCE))
+        m = 0.1 + self.mask(-d / r[:, None])
+        return e * m * (0.25 + cos_x)
+
+    def sample(self, x, n, u):
+        """Directions (unit, to the light), shadow-ray distances, estimates: irradiance before
+        visibility = weight * rgb."""
+        count = len(x)
+        rel = self.center - x
+        d2 = _dot(rel, rel)
+        d = np.sqrt(d2)
+        to_c = rel / np.where(d > 0, d, 1.0)[:, None]
+        r, r2 = self.radius, self.radius ** 2
+        w = np.empty((count, 3))
+        t = np.empty(count)
+        weight = np.empty(count)
+        masked = np.ones(count, bool)
+        if self.sphere:
+            out = d2 > r2
+            if np.any(out):
+                s2 = r2 / d2[out]
+                omc = s2 / (1.0 + np.sqrt(1.0 - s2))           # 1 - cos theta_max, precise
+                z = 1.0 - u[out, 0] * omc
+                rho = np.sqrt(np.maximum(0.0, u[out, 0] * omc * (2.0 - u[out, 0] * omc)))
+                phi = 2.0 * np.pi * u[out, 1]
+                tt, bb = sampling.orthonormal_basis(to_c[out])
+                wo = (rho * np.cos(phi))[:, None] * tt + (rho * np.sin(phi))[:, None] * bb \
+                    + z[:, None] * to_c[out]
+                w[out] = wo
+                do = d[out]
+                t[out] = do * z - np.sqrt(np.maximum(0.0, r2 - do * do * (1.0 - z * z)))
+                weight[out] = 2.0 * np.pi * omc
+            inside = ~out
+            if np.any(inside):
+                ni = n[inside].astype(np.float64)
+                tt, bb = sampling.orthonormal_basis(ni)
+                wi = sampling.to_world(sampling.square_to_cosine_hemisphere(u[inside]), tt, bb, ni)
+                w[inside] = wi
+                di = d[inside]
+                c = _dot(wi, to_c[inside])
+                t[inside] = di * c + np.sqrt(np.maximum(0.0, r2 - di * di * (1.0 - c * c)))
+                weight[inside] = np.pi          # cos / pdf, cos is in the pdf
+                masked[inside] = False
+            cos_x = np.where(out, np.maximum(_dot(n, w), 0.0), 1.0)
+        else:
+            # Disk through the centre facing x (normal from the centre to x).
+            facing = -to_c
+            facing[d <= 0] = (0.0, 0.0, 1.0)
+            tt, bb = sampling.orthonormal_basis(facing)
+            disk = sampling.square_to_disk(u) * r
+            p = self.center + disk[:, 0:1] * tt + disk[:, 1:2] * bb
+            v = p - x
+            t = np.sqrt(np.maximum(_dot(v, v), 1e-300))
+            w = v / t[:, None]
+            cos_l = np.maximum(-_dot(w, facing), 0.0)
+            cos_x = np.maximum(_dot(n, w), 0.0)
+            weight = np.pi * r2 * cos_l / (t * t)
+        if self.axis is not None:
+            weight = weight * np.where(masked, self.mask(-w), 1.0)
+        weight = weight * cos_x
+        ok = np.isfinite(weight) & (t > 0)
+        return w, np.where(ok, t, 0.0), np.where(ok, weight, 0.0)
+
+    def intersect(self, origins, directions, t_max):
+        """Nearest hit t (N,) of rays with the light as Cycles intersects it (inf: none before
+        ``t_max``), and the radiance factor there (1, or a spot's mask; 0 for no hit)."""
+        rel = origins - self.center                     # from the centre to the origins
+        d2 = _dot(rel, rel)
+        r2 = self.radius ** 2
+        b = _dot(directions, rel)
+        if self.sphere:
+            disc = b * b - (d2 - r2)
+            root = np.sqrt(np.maximum(disc, 0.0))
+            near, far = -b - root, -b + root
+            t = np.where(near > 0, near, far)
+            hit = (disc >= 0) & (t > 0)
+            apply_mask = d2 > r2
+        else:
+            # The plane through the centre with normal towards the origin: t = d / cos.
+            d = np.sqrt(d2)
+            cos_a = -b / np.where(d > 0, d, 1.0)       # cos between the ray and the normal
+            t = d / np.where(cos_a > 0, cos_a, 1.0)
+            q = rel + t[:, None] * directions
+            hit = (cos_a > 1e-12) & (d > 0) & (_dot(q, q) < r2)
+            apply_mask = np.ones(len(t), bool)
+        if self.axis is not None:
+            hit &= b < 0                                 # Cycles: spots are one-sided
+        hit &= t < t_max
+        t = np.where(hit, t, np.inf)
+        factor = hit.astype(np.float64)
+        if self.axis is not None:
+            factor *= np.where(apply_mask, self.mask(-directions), 1.0)
+        return t, factor
+
+
 class SunCone:
     """A sun with an angular diameter: uniform directions in its cone."""
 
@@ -347,7 +516,9 @@ class LightSet:
         self.collimated = []       # AreaLight with collimated=True
         self.sampled = []
         for light in scene.lights:
-            if isinstance(light, PointLight):
+            if isinstance(light, (PointLight, SpotLight)) and light.radius > 0:
+                self.sampled.append(SphereLight(light))
+            elif isinstance(light, PointLight):
                 self.points_pos.append(light.position)
                 self.points_intensity.append(light.flux / (4 * np.pi))
                 self.point_names.append(light.name)
@@ -457,3 +628,25 @@ class LightSet:
             "collimated_area": len(self.collimated),
             "sampled": [f"{getattr(s, 'kind', '?')}:{s.name}" for s in self.sampled],
         }
+
+
+def seen_light_radiance(lights_or_scene, origins, directions, t_hit) -> np.ndarray:
+    """Radiance (N, 3) [W m^-2 sr^-1] of the point / spot lights with a radius that rays
+    (``origins`` (N, 3), unit ``directions`` (N, 3)) meet before ``t_hit`` (N,) (np.inf where
+    the ray left the scene); the nearest light wins, a spot's mask on the ray's direction
+    (Cycles ``spot_light_sample_from_intersection``); 0 elsewhere. ``lights_or_scene``: a
+    ``LightSet`` or a ``Scene``. For camera paths after a delta (mirror, smooth glass) bounce,
+    where no light sample could reach the light."""
+    lights = lights_or_scene if isinstance(lights_or_scene, LightSet) else LightSet(lights_or_scene)
+    o = np.asarray(origins, np.float64).reshape(-1, 3)
+    w = np.asarray(directions, np.float64).reshape(-1, 3)
+    best = np.broadcast_to(np.asarray(t_hit, np.float64), (len(o),)).copy()
+    out = np.zeros((len(o), 3))
+    for light in lights.sampled:
+        if not isinstance(light, SphereLight):
+            continue
+        t, factor = light.intersect(o, w, best)
+        nearer = t < best
+        best = np.where(nearer, t, best)
+        out[nearer] = factor[nearer, None] * light.rgb[None]
+    return out

@@ -3,7 +3,10 @@
 What it computes (seed sections 9.1-9.5, corrections in DESIGN.md §4)
     ``emit_photons(scene, count, rng)``  photons leaving every light, shared among the lights
         in proportion to their flux; each carries its light's RGB flux / its photon count:
-        point (uniform sphere, 9.1.1), spot (uniform in its cone, weighted by Blender's mask),
+        point (uniform sphere, 9.1.1), spot (uniform in its cone, weighted by Blender's mask;
+        with a radius both leave from the sphere's surface, ``lights.sphere_emission_origins``:
+        the rays of a Lambertian sphere, flux Phi; Soft Falloff's near-field dimming,
+        d^2 / (d^2 + R^2), is not in the photons),
         sun (a disk covering the scene's bounds), area lights (area-uniform points, cosine
         directions, Eq. 9.5; collimated ones along the normal, 9.1.2), emissive meshes
         (triangle by area with ``searchsorted`` on cumulative areas, the seed's "area line",
@@ -40,7 +43,7 @@ import numpy as np
 
 from . import sampling
 from .accel import offset_distance
-from .lights import LUMINANCE, spot_mask
+from .lights import LUMINANCE, sphere_emission_origins, spot_mask
 from .npzjson import pack_json, unpack_json
 from .scene import MAX_COORDINATE, MAX_VALUE, AreaLight, PointLight, Scene, SpotLight, SunLight
 from .bsdf import MaterialTable, sample_glossy
@@ -209,6 +212,8 @@ def emit_photons(scene: Scene, count: int, rng: np.random.Generator) -> EmittedP
             t, b = sampling.orthonormal_basis(d)
             disk = sampling.square_to_disk(v) * radius
             o = center - d * (2 * radius) + disk[:, 0:1] * t + disk[:, 1:2] * b
+        if kind in ("point", "spot") and spec[1].radius > 0:   # a sphere light (lights.py)
+            o = sphere_emission_origins(spec[1].position, spec[1].radius, d, v)
         if kind in ("point", "spot", "area"):
             # Start an offset away from the light, as shadow rays stop short of it: a light
             # touching or lying in a surface (a panel flush with the ceiling) sends its photons

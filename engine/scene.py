@@ -14,6 +14,7 @@ positions           metres, world space, Z up (Blender's)
 ``specular``        perfect specular reflectance rho_s per channel, in [0, 1]
 ``exitance``        radiant exitance M [W/m^2] per channel; radiance L = M / pi per emitting side
 point ``flux``      radiant flux Phi [W] per channel; E = Phi cos(theta) / (4 pi r^2) (Eq. 7.1)
+point ``radius``    metres; a sphere (or facing disk) light of radiance Phi / (4 pi^2 R^2)
 sun ``irradiance``  W/m^2 at normal incidence per channel
 area ``power``      W per channel; one-sided Lambertian, L = P / (pi A)
 world ``radiance``  W m^-2 sr^-1 per channel, a uniform environment
@@ -113,19 +114,44 @@ def _share(value, name: str) -> float:
     return share
 
 
+def _radius(value, name: str) -> float:
+    """A point / spot light's radius [m]: a finite number >= 0."""
+    try:
+        radius = float(value)
+    except (TypeError, ValueError):
+        raise SceneError(f"{name}: radius {value!r} is not a number") from None
+    if not (np.isfinite(radius) and radius >= 0):
+        raise SceneError(f"{name}: radius {value!r} m must be a finite number >= 0")
+    return radius
+
+
 @dataclass
 class PointLight:
-    """Isotropic point light of radiant flux ``flux`` [W] (seed 3.3.1, Eq. 7.1)."""
+    """Isotropic point light of radiant flux ``flux`` [W] (seed 3.3.1, Eq. 7.1).
+
+    ``radius`` [m] (default 0: a point, hard shadows) is Blender's Radius
+    (``shadow_soft_size``). With ``radius`` R > 0 the light has a size, as in Cycles 4.x/5.x,
+    with radiance L = Phi / (4 pi^2 R^2) (Cycles: Phi / (pi x sphere area)):
+    * ``soft_falloff`` False: a Lambertian sphere of radius R; its flux is Phi and outside it
+      E = Phi cos(theta) / (4 pi d^2) wherever the whole sphere is above the horizon;
+    * ``soft_falloff`` True (default, Blender's Soft Falloff default): a disk of radius R
+      facing each shading point, so E = Phi cos(theta) / (4 pi (d^2 + R^2)) on its axis.
+    Both cast soft shadows. ``soft_falloff`` is ignored when ``radius`` is 0.
+    """
 
     name: str
     position: np.ndarray
     flux: np.ndarray
     photon_share: float = 1.0
+    radius: float = 0.0
+    soft_falloff: bool = True
 
     def __post_init__(self):
         self.position = _vec3(self.position, self.name, "position")
         self.flux = _rgb(self.flux, self.name, "flux")
         self.photon_share = _share(self.photon_share, self.name)
+        self.radius = _radius(self.radius, self.name)
+        self.soft_falloff = bool(self.soft_falloff)
 
 
 @dataclass
@@ -134,6 +160,10 @@ class SpotLight:
 
     ``direction`` is the cone axis (the way light travels). ``half_angle`` [rad] is half of
     Blender's spot size; ``blend`` in [0, 1] is Blender's spot blend (smooth edge).
+    ``radius`` [m] (default 0) and ``soft_falloff`` (default True) as for :class:`PointLight`:
+    a sphere (or facing disk) of radiance Phi / (4 pi^2 R^2) whose emission along a direction
+    is masked by the cone evaluated on that direction (Cycles: each light sample's own
+    direction from the light to the shading point; no mask for points inside the sphere).
     """
 
     name: str
@@ -143,9 +173,13 @@ class SpotLight:
     half_angle: float
     blend: float = 0.0
     photon_share: float = 1.0
+    radius: float = 0.0
+    soft_falloff: bool = True
 
     def __post_init__(self):
         self.photon_share = _share(self.photon_share, self.name)
+        self.radius = _radius(self.radius, self.name)
+        self.soft_falloff = bool(self.soft_falloff)
         self.position = _vec3(self.position, self.name, "position")
         self.direction = _unit(self.direction, self.name, "direction")
         self.flux = _rgb(self.flux, self.name, "flux")

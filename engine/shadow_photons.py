@@ -5,8 +5,9 @@ shadows using the photon map")
     ``build_shadow_photon_map(scene, accel, lights, count)`` emits ``count`` photons from the
     sampled lights that have a position (``lights.sampled`` entries that are
     ``TriangleEmitter``: square / rectangle area lights and emissive meshes, or
-    ``EllipseEmitter``: disk / ellipse area lights; suns with an angle and the world keep plain
-    shadow rays). A light whose ``shadow_photons`` flag is off (``AreaLight.shadow_photons``,
+    ``EllipseEmitter``: disk / ellipse area lights; suns with an angle, point and spot lights
+    with a radius (``SphereLight``: their penumbrae are traced, as for an area light whose
+    ``shadow_photons`` is off) and the world keep plain shadow rays). A light whose ``shadow_photons`` flag is off (``AreaLight.shadow_photons``,
     Blender's ``Light.lanterna.shadow_photons``, carried onto its emitter by ``LightSet``)
     sends none: the map does not cover it (``covers`` is False), so ``engine/direct.py`` traces
     all of its shadow rays. Emission is that of the photon map for area lights: an

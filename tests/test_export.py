@@ -557,7 +557,10 @@ def test_light_conversion():
     np.testing.assert_allclose(sp.flux, 80.0, rtol=1e-6)
     assert sp.half_angle == pytest.approx(0.5, rel=1e-6)
     assert sp.blend == pytest.approx(0.3, rel=1e-6)
-    assert any("'Spot'" in w and "radius" in w for w in s.warnings)
+    assert sp.radius == pytest.approx(0.1, rel=1e-6)        # a sphere light, no warning
+    assert sp.soft_falloff == bool(getattr(spot, "use_soft_falloff", True))
+    assert not any("'Spot'" in w for w in s.warnings)
+    assert p.radius == 0.0
 
     su = lights["Sun"]
     assert isinstance(su, SunLight)

@@ -48,10 +48,13 @@ animation already applied by Blender) and turns it into the renderer's inert sce
 * **Lights** (also instanced ones), colour = Color x (blackbody colour if Use Temperature)
   x Power x 2^Exposure (x the node tree's Emission Strength x Color):
 
-  - Point: :class:`PointLight`, flux Phi = P x colour [W]. A radius (Radius / shadow_soft_size
-    > 0) is ignored, with a warning: the light is a point.
-  - Spot: :class:`SpotLight`, half angle = Spot Size / 2, blend = Spot Blend, flux as a point,
-    axis = the light's world -Z. Square spots are reported and treated as round.
+  - Point: :class:`PointLight`, flux Phi = P x colour [W], radius = Radius
+    (``shadow_soft_size``) [m] as set (the object's scale does not change it, as in Cycles),
+    ``soft_falloff`` = Soft Falloff (``use_soft_falloff``, Blender's default True): a radius
+    > 0 makes a sphere light (Soft Falloff off) or Cycles' facing disk (on), soft shadows.
+  - Spot: :class:`SpotLight`, half angle = Spot Size / 2, blend = Spot Blend, flux, radius
+    and soft falloff as a point, axis = the light's world -Z. Square spots are reported and
+    treated as round.
   - Sun: :class:`SunLight`, irradiance = Strength x colour [W/m^2], direction = world -Z,
     angle = Angle [rad].
   - Area: :class:`AreaLight`, shape, world matrix, size_x = Size, size_y = Size Y [m], power =
@@ -635,19 +638,19 @@ def _convert_light(name: str, light, matrix: np.ndarray, warn: _Warnings):
 
     if kind in ("POINT", "SPOT"):
         radius = float(getattr(light, "shadow_soft_size", 0.0))
-        if radius > 0:
-            warn(f"Light '{name}': radius {_fmt(radius)} m is ignored; rendered as a point "
-                 f"light (hard shadows)")
+        soft = bool(getattr(light, "use_soft_falloff", True))
         if not normalize:
             warn(f"Light '{name}': Normalize off is not supported; treated as normalized")
         if kind == "POINT":
-            return PointLight(name, position=position, flux=power)
+            return PointLight(name, position=position, flux=power, radius=radius,
+                              soft_falloff=soft)
         if getattr(light, "use_square", False):
             warn(f"Light '{name}': square spot cone is treated as round")
         if np.linalg.norm(down) == 0:
             raise SceneError(f"Light '{name}': zero scale, the spot has no direction")
         return SpotLight(name, position=position, direction=down, flux=power,
-                         half_angle=0.5 * float(light.spot_size), blend=float(light.spot_blend))
+                         half_angle=0.5 * float(light.spot_size), blend=float(light.spot_blend),
+                         radius=radius, soft_falloff=soft)
 
     if kind == "SUN":
         if not normalize:
