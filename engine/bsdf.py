@@ -431,17 +431,20 @@ def glossy_material(closures) -> GlossyMaterial | None:
     return GlossyMaterial(lobes, layer)
 
 
-def sample_glossy(table: MaterialTable, material_ids, wo, n, rng, front=None):
+def sample_glossy(table: MaterialTable, material_ids, wo, n, rng, front=None,
+                  with_delta: bool = False):
     """One direction per hit on materials with glossy lobes (``table.glossy``), in the hits'
     order, grouped by material: a lobe picked in proportion to the largest channel of its
     weight x albedo(wo), then sampled. Returns (wi (N, 3), weight (N, 3) = w f |cos| /
     (pdf P), sharp (N,) whether the picked lobe is sharp). ``wo``, ``n`` (N, 3) float64, ``n``
     on wo's side; ``front`` (N,) whether each hit is on the front face (glass refracts into
-    the object there; None: all are)."""
+    the object there; None: all are). ``with_delta``: also return delta (N,), whether the
+    picked lobe is a delta (a mirror or smooth glass)."""
     count = len(material_ids)
     wi_out = np.zeros((count, 3))
     weight_out = np.zeros((count, 3))
     sharp_out = np.zeros(count, bool)
+    delta_out = np.zeros(count, bool)
     for material_id in np.unique(material_ids):
         spec = table.glossy[material_id]
         hits = np.flatnonzero(material_ids == material_id)
@@ -449,6 +452,7 @@ def sample_glossy(table: MaterialTable, material_ids, wo, n, rng, front=None):
             continue
         side = None if front is None else front[hits]
         lobes = [(lobe.weight, lobe.at(len(hits), side), lobe.sharp) for lobe in spec.lobes]
+        deltas = [lobe.delta for lobe in spec.lobes]
         wo_h, n_h = wo[hits], n[hits]
         shares = np.stack([(w[None, :] * lobe.albedo(wo_h, n_h)).max(axis=1)
                            for w, lobe, _ in lobes], axis=1)
@@ -466,4 +470,7 @@ def sample_glossy(table: MaterialTable, material_ids, wo, n, rng, front=None):
             weight_out[at] = np.nan_to_num(weight * w[None, :] /
                                            (shares[sel, j] / total[sel])[:, None])
             sharp_out[at] = sharp
+            delta_out[at] = deltas[j]
+    if with_delta:
+        return wi_out, weight_out, sharp_out, delta_out
     return wi_out, weight_out, sharp_out

@@ -50,6 +50,7 @@ from . import sampling
 from .camera import pixel_rays
 from .bsdf import sample_glossy
 from .direct import direct_terms, irradiance_from_terms
+from .lights import SphereLight, seen_light_radiance
 from .settings import RenderSettings, camera_blocks
 
 # What each camera batch counts (rays, seconds of threads, look-ups); summed over batches.
@@ -196,6 +197,8 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
     # it counts the world or emitter it meets and is not shaded.
     probes = None
     ray_of = np.arange(count)
+    deltas = None          # per ray: it left a mirror or smooth glass (sees lights' glints)
+    sphere_lights = any(isinstance(light, SphereLight) for light in context.lights.sampled)
     world = scene.world.radiance
     if photon is not None and photon.lookups < spp:
         first_lookup = rng.integers(0, spp, pixels)
@@ -218,6 +221,15 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
         stats["trace_seconds"] += time.perf_counter() - t0
         stats["camera_rays" if depth == 0 else "specular_rays"] += len(origins)
         hit = prim >= 0
+        if depth > 0 and sphere_lights and deltas.any():
+            # Lights with a radius seen after a mirror or smooth glass bounce (no light sample
+            # reaches them through a delta lobe): their glint.
+            d_rays = np.flatnonzero(deltas)
+            t_seen = np.where(hit[d_rays], _t[d_rays], np.inf)
+            glint = seen_light_radiance(context.lights, origins[d_rays], directions[d_rays],
+                                        t_seen)
+            add_to_pixels(emission_sums, ray_of[d_rays] // spp,
+                          glint * throughput[d_rays])
         all_hit = bool(hit.all())
         if not all_hit and not scene.world.is_black:
             missed = np.broadcast_to(world, (int((~hit).sum()), 3)) if throughput is None \
@@ -331,7 +343,7 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
         directions, weight, _pdf = surface.subset(idx).bsdf().mirror.sample(-d[idx], ns[idx])
         keep = np.ones(len(idx), bool)
         if glossy is not None:
-            g_dirs, g_weight, g_keep, g_collect = glossy.sample(rng)
+            g_dirs, g_weight, g_keep, g_collect, g_delta = glossy.sample(rng)
             stats["glossy_rays"] += glossy.count
             idx = np.concatenate([idx, glossy.index])
             directions = np.concatenate([directions, g_dirs.astype(directions.dtype)])
@@ -341,13 +353,16 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
                                            g_collect])
             probe_next = np.concatenate([np.zeros(len(directions) - len(g_dirs), bool),
                                          ~glossy.goes_on[glossy.index]])
+            delta_next = np.concatenate([np.ones(len(directions) - len(g_dirs), bool), g_delta])
             idx, directions, weight = idx[keep], directions[keep], weight[keep]
             collect_next, probes = collect_next[keep], probe_next[keep]
+            deltas = delta_next[keep]
             if collecting is not None:
                 collect_next &= collecting[idx]
             collects = collect_next
         else:
             probes = None
+            deltas = np.ones(len(idx), bool)
             if collecting is not None:
                 collects = collecting[idx]
         if len(idx) == 0:
@@ -557,15 +572,16 @@ class _GlossyHits:
 
     def sample(self, rng):
         """One ray per glossy hit, in the order of ``index`` (``bsdf.sample_glossy``):
-        returns (directions, weight = w f cos / (pdf P), kept, collects) where ``collects``
+        returns (directions, weight = w f cos / (pdf P), kept, collects, delta) where
+        ``delta`` says the picked lobe is a mirror or smooth glass and ``collects``
         says whether the ray counts the emissive meshes it hits (sharp lobes: see
         ``bsdf.SHARP_ALPHA``; the world it reaches always counts). From hits where the path
         ends the ray is an emission probe."""
-        wi, weight, sharp = sample_glossy(self.materials, self.material_ids,
-                                          self.wo[self.index].astype(np.float64),
-                                          self.n[self.index].astype(np.float64), rng,
-                                          self.front[self.index])
-        return wi, weight, np.any(weight > 0, axis=1), sharp
+        wi, weight, sharp, delta = sample_glossy(self.materials, self.material_ids,
+                                                 self.wo[self.index].astype(np.float64),
+                                                 self.n[self.index].astype(np.float64), rng,
+                                                 self.front[self.index], with_delta=True)
+        return wi, weight, np.any(weight > 0, axis=1), sharp, delta
 
     def radiance(self, target, directions, hittable):
         """f summed over the lobes (k, 3) for light samples of the glossy hits ``target``
