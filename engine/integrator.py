@@ -24,7 +24,15 @@ What it computes
           (``_GlossyHits``). The world reaches glossy lobes only through their own rays;
           emissive meshes through their rays for sharp lobes (``bsdf.SHARP_ALPHA``), through
           light samples otherwise, so that each light is counted once. Photons and the final
-          gather still see the seed's reduction of these materials (``shaders``).
+          gather still see the seed's reduction of these materials (``shaders``), but for
+          glass, which they refract through as the camera does;
+        * glass (``bsdf.GlassLobe``: Glass, Refraction, Principled Transmission) is a lobe
+          like the glossy ones that always goes on: eta = IOR entering a front face, 1 / IOR
+          leaving by a back face, all its light from its own rays;
+        * caustics: at diffuse hits (``full`` mode) the caustic map's irradiance
+          (``indirect.CausticEstimate``, ``context.caustics``) x rho_d / pi, in Indirect;
+        * after a mirror or smooth-glass bounce, point and spot lights with a radius that the
+          ray meets add their radiance (``lights.seen_light_radiance``: their glints).
         Materials are read through ``bsdf`` (``SceneSurfaces.params``). Pixels whose filter
         may hold an emitter's edge (``emitter_edges``) take their camera-seen emission from
         ``EDGE_SAMPLES_FACTOR`` x samples of their own (``edge_emission``): at 16 spp such a

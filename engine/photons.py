@@ -22,6 +22,13 @@ What it computes (seed sections 9.1-9.5, corrections in DESIGN.md §4)
         ``max_bounces`` caps the path so a white (rho = 1) enclosure ends. Bookkeeping per
         RGB channel: emitted = absorbed + escaped + capped in expectation, where absorbed
         adds (1 - rho_d - rho_s) x the power of every hit.
+    ``build_caustic_map(scene, accel, emitted_count, ...)``  the caustic map (Jensen 1996):
+        photons traced with ``trace_photons(caustic=True)`` (light -> specular+ -> diffuse
+        paths only), in independently emitted chunks; ``specular_share`` (a pilot of
+        ``CAUSTIC_PILOT`` photons) measures the share of the lights' photons whose first hit
+        is specular, which ``caustic_emission_count`` turns into the count emitted for
+        ``auto_caustic_stored`` (2 per pixel, 50k-1M) to reach specular surfaces; the
+        estimate's radius cap is 4 x the median k-nearest radius at its own photons.
     ``PhotonMap``  compact float32/float16 arrays (36 bytes a photon), a kd-tree from a
         library (pykdtree or scipy's cKDTree, whichever is faster here), and the radiance
         estimate of Eq. 9.11 with the seed's filters: photons arriving from below the surface

@@ -9,10 +9,11 @@ What it computes
 The flow (DESIGN.md §1), each stage in its own module:
     0. the settings resolved and checked (``engine/settings.py``) and the cost estimate made
        before any work; a render that cannot fit in memory is refused (``engine/estimate.py``)
-    1-8. ``preparation.prepare``: validate, BVH, lights, the plan, photons, precomputed
-       irradiance, irradiance cache, shadow photons (``engine/preparation.py``)
+    1-8. ``preparation.prepare``: validate, BVH, lights, the plan, caustic map, photons,
+       precomputed irradiance, irradiance cache, shadow photons (``engine/preparation.py``)
     9. the camera: blocks of the frame on a thread pool, direct light plus the indirect
-       estimator at each diffuse hit, mirrors followed (``engine/integrator.py``)
+       estimator and the caustic map at each diffuse hit, mirrors, glossy lobes and glass
+       followed to the plan's specular depth (``engine/integrator.py``)
     10. the diagnostic passes from the maps (``engine/passes.py``) and the report's last
        fields
 ``progress(fraction, text)`` is called between batches and ``cancelled()`` polled there

@@ -9,6 +9,10 @@ What it computes
         3. ``lights``               exactly evaluated and sampled lights (``engine/lights.py``)
         4. the plan                 which of the stages below this scene needs, each with its
                                     reason, before any work (``engine/plan.py``)
+        5a. ``caustics``            the caustic photon map where a pilot of photons finds
+                                    lights that see specular or glass surfaces
+                                    (``photons.build_caustic_map``, ``indirect.CausticEstimate``;
+                                    not kept in baked artifacts: made again each render)
         5. ``photons``              emit, trace, store, kd-tree (``engine/photons.py``)
         6. ``radiance_estimates``   irradiance precomputed at a quarter of the photons
                                     (Christensen 1999, ``engine/gather.py``)
