@@ -209,6 +209,9 @@ def scene_sentence(s: dict) -> str:
                 f"({100 * first['error']:.2f} % in {first['seconds']:.1f} s)")
     elif c["status"] == "interpolated":
         why += f"; Cycles reaches that error in {c['seconds']:.1f} s"
+        if s["scene"] == GOAL_SCENE and not goal_met(c):
+            why += (f", so the goal needs final at this error in <= "
+                    f"{GOAL_RATIO * c['seconds']:.1f} s")
     elif c["status"] == "beyond":
         last = s["cycles_rows"][-1]
         why += (f"; Cycles is still at {100 * last['error']:.2f} % after "
@@ -416,6 +419,7 @@ def write_plot(data: dict, path) -> None:
     final as a star and a dotted line at its error (matplotlib, Agg)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
+    from matplotlib.ticker import FuncFormatter, NullFormatter
 
     from ..engine import imageio
 
@@ -445,6 +449,9 @@ def write_plot(data: dict, path) -> None:
             ax.axvline(s["cycles"]["seconds"], color="tab:orange", ls=":", lw=1)
         ax.set_xscale("log")
         ax.set_yscale("log")
+        for axis in (ax.xaxis, ax.yaxis):
+            axis.set_major_formatter(FuncFormatter(lambda v, _pos: f"{v:g}"))
+            axis.set_minor_formatter(NullFormatter())
         ax.grid(True, which="both", alpha=0.3)
         w, h = s["resolution"]
         ax.set_title(f"{s['scene']} ({w}x{h}): ratio {ratio_text(s['cycles'])}", fontsize=10)
