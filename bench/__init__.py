@@ -10,6 +10,8 @@ extension zips leave this folder out, and ``lanterna bench`` finds it only in a 
                              the cost estimate (``engine/estimate.py``) and their check
     ``sweep.py``             ``--sweep``: quality settings against a reference and Cycles
     ``vs_cycles.py``         ``--vs-cycles``: the ``final`` preset against Cycles
+    ``materials.py``         ``--materials``: ``final``'s time against Cycles' at the same
+                             error on the material scenes (issue 23)
     ``cache_index.py``       ``--cache-index``: the irradiance cache's grid against its kd-tree
     ``validation.py``        ``--validation``: writes docs/validation.md
     ``performance.py``       ``--performance``: writes docs/performance.md (runs the sweep)

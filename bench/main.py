@@ -30,7 +30,8 @@ Parameters
     photon benchmark), ``--json FILE``. ``--calibrate`` (measure this machine's rates for the
     cost estimate, then check it on the seed scenes) and ``--check-estimate`` (the check
     alone) hand over to ``bench/calibrate.py``, ``--sweep`` to ``bench/sweep.py``,
-    ``--vs-cycles`` to ``bench/vs_cycles.py`` and ``--cache-index`` to ``bench/cache_index.py``.
+    ``--materials`` to ``bench/materials.py``, ``--vs-cycles`` to ``bench/vs_cycles.py`` and
+    ``--cache-index`` to ``bench/cache_index.py``.
 """
 from __future__ import annotations
 
@@ -49,6 +50,9 @@ def main(argv=None) -> int:
             return 2
         from .sweep import main as sweep_main
         return sweep_main([a for a in argv if a != "--sweep"])
+    if "--materials" in argv:  # issue 23: final against Cycles on the material scenes
+        from .materials import main as materials_main
+        return materials_main([a for a in argv if a != "--materials"])
     if "--calibrate" in argv or "--check-estimate" in argv:  # issue 6: rates (calibrate.py)
         from .calibrate import main as calibrate_main
         return calibrate_main(argv)
@@ -71,6 +75,9 @@ def main(argv=None) -> int:
     parser.add_argument("--sweep", action="store_true",
                         help="a sweep over quality settings against a reference and Cycles; "
                              "see bench/sweep.py (--sweep --help)")
+    parser.add_argument("--materials", action="store_true",
+                        help="final's time against Cycles' for the same error on the material "
+                             "scenes; see bench/materials.py (--materials --help)")
     parser.add_argument("--calibrate", action="store_true",
                         help="measure this machine's rates for the cost estimate, write them "
                              "and check the estimate on the seed scenes; see "

@@ -11,6 +11,8 @@ about 20 minutes on 2 cores)
        tracing the same rays; photon tracing against raw embreex; photon-map estimates against
        raw pykdtree answering the same k-nearest queries; the irradiance cache's grid against
        its kd-tree (``bench/cache_index.py``).
+    3. Not rerun here: the section "Materials against Cycles (issue 23)" written by
+       ``lanterna bench --materials`` (``bench/materials.py``) is kept as it is.
 These are benchmarks on a shared machine, never tests: they print and record, and assert
 nothing.
 """
@@ -108,6 +110,11 @@ def write(path: Path, sweeps: dict, throughput: dict, minutes: float) -> None:
               f"{ph['trace_seconds']:.2f} s, kd-tree {ph['build_seconds']:.2f} s; a "
               f"`photon-map` render at 640 × 480 takes "
               f"{ph['photon_map_render']['total_seconds']:.1f} s."]
+    from .materials import section_of
+
+    kept = section_of(path.read_text(encoding="utf-8")) if path.is_file() else None
+    if kept:                    # bench/materials.py's section: rewritten only by that module
+        lines += ["", kept.rstrip("\n")]
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
 
 

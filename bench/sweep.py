@@ -586,7 +586,12 @@ def _reference_ready(spec, args) -> bool:
     return (CACHE_DIR / f"{key}_{w}x{h}_{args.reference_samples}.npz").is_file()
 
 
-def _figures(image, ref: dict) -> dict:
+def figures(image, ref: dict) -> dict:
+    """An image's errors against ``ref`` ({"image": (H, W, 3), "variance": the reference's
+    per-pixel noise variance or None}): rel_rmse, rel_rmse_corrected (None without the
+    variance), region_mean_rel_error and region_worst_rel_error (the 4 x 4 blocks'
+    |mean(img) / mean(ref) - 1|: mean and max), block_ratios, mse, and ``error``: the corrected
+    figure where the variance is known, else rel_rmse (the module docstring's columns)."""
     from .vs_cycles import errors
 
     e = errors(image, ref["image"], ref["variance"])
@@ -684,7 +689,7 @@ def sweep_scene(spec: dict, args, cycles, tmpdir, warm: dict, memory: PeakMemory
                "rss_start_mb": mem["rss_start_mb"],
                "process_peak_memory_mb": rep.get("peak_memory_mb"),
                "warnings": rep.get("warnings", [])}
-        row.update(_figures(image, ref))
+        row.update(figures(image, ref))
         out["points"].append(row)
         if index == 0 and len(points) > 1:
             left = (len(points) - 1) * sum(run[0] for run in runs) + est["cycles"]
@@ -722,7 +727,7 @@ def sweep_scene(spec: dict, args, cycles, tmpdir, warm: dict, memory: PeakMemory
                    "peak_rss_mb": None, "peak_above_start_mb": None}
             if den:
                 row["denoiser_changed_image"] = crow.get("denoiser_changed_image")
-            row.update(_figures(curve["images"][("cycles", spp, den)], ref))
+            row.update(figures(curve["images"][("cycles", spp, den)], ref))
             out["points"].append(row)
     analyse(out)
     out["seconds_total"] = time.perf_counter() - started
@@ -993,7 +998,10 @@ def print_scene(out: dict) -> None:
 
 
 # -- Command line ------------------------------------------------------------------------------
-def _machine() -> dict:
+def machine_info() -> dict:
+    """The machine a benchmark ran on: cpu_count, cpu (model name), platform, python, numpy,
+    date (ISO), load_average_start (1, 5, 15 min, where the OS tells) and blender (bpy's
+    version, when bpy imports)."""
     model = platform.processor()
     with contextlib.suppress(OSError):
         with open("/proc/cpuinfo") as fh:
@@ -1110,7 +1118,7 @@ def run(args, argv) -> tuple[dict, int]:
         raise BenchError(f"--out {args.out}: not writable")
     cycles = cycles_functions()
     memory = PeakMemory()
-    machine = _machine()
+    machine = machine_info()
     command = "lanterna bench --sweep " + " ".join(shlex.quote(a) for a in argv)
     print(f"{command}\nLanterna quality sweep: knobs {', '.join(args.knobs)} around the base "
           f"({args.base_spec}), presets {', '.join(args.presets) or 'none'}; "
