@@ -7,9 +7,10 @@ Direct, Indirect and Color, with Emit and Env (``engine/passes.py``).
   part is (light / Col) x Col in float32). Asking for the passes leaves Combined bit for bit
   as it was. Planted bugs it catches: the label taken from the last bounce instead of the
   first (the copper reflects the glass: the light of paths through it went to Transmission,
-  where the copper's TransCol is 0, and fell out of the sum: off by 0.04 at the worst pixel);
+  where the copper's TransCol is 0, and fell out of the sum: off by 0.25 at the worst pixel);
   light at later hits filed by the kind of the surface it lights (the floor seen through
-  glass or in the copper: Diffuse, whose Col is 0 there: off by 0.2).
+  glass or in the copper filed as Diffuse, whose Col is 0 there: off by 0.56); Direct taken
+  one bounce late (GlossDir empty).
 * **Pure diffuse**: a floor and the sky: Glossy and Transmission passes are exactly 0,
   DiffCol = rho_d on the floor, Env = the world's radiance in the sky, and Combined =
   (DiffDir + DiffInd) DiffCol + Env, DiffDir x DiffCol = Lanterna's Direct.
@@ -21,8 +22,8 @@ Direct, Indirect and Color, with Emit and Env (``engine/passes.py``).
   came back is Transmission Indirect, summing with it to the closed form 2F / (1 + F)
   (binomial: 0.6 % SD, bound 3 %). Head-on
   with the plane behind: all light is Transmission Indirect, (1 - F) / (1 + F) (0.3 % SD).
-  Planted bugs: the glass's albedo all in TransCol (TransCol = 1, not 0.96); the reflected ray
-  labelled Transmission (GlossDir = 0); Direct taken at the second hit (the glint in Ind).
+  Planted bugs (each fails here): the glass's albedo all in TransCol (TransCol = 1, not
+  0.96); Direct taken one bounce late (the reflection in GlossInd).
 """
 import numpy as np
 import pytest
