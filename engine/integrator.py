@@ -4,7 +4,9 @@ What it computes
     ``render_camera(context, progress, cancelled)`` -> ``CameraImage``: the Combined image
     (linear radiance [W m^-2 sr^-1], flat (pixels, 3) float32 of the render window, top row
     first), the Emission, Direct and Indirect parts the passes ask for, the Cache usage shares
-    and the batches' summed counters.
+    and the batches' summed counters; with ``CameraContext.light_passes``, Cycles' light
+    passes' sums (``passes.LightSums``: each path's light by its first bounce's kind, the first
+    hit's albedos), nothing of which is computed otherwise.
     ``shade_block(context, index, pixels, camera)``  one batch: ``samples`` rays a pixel
         through the Blackman-Harris filter (``engine/camera.py``); at each hit
         * emission (surfaces and the world seen from the camera or in mirrors);
@@ -420,7 +422,6 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
         if light is not None:
             seen, seen_world = seen
             light.emit[edge_pixels] += (seen - seen_world) * spp
-            # (the world and the emitters are apart per ray: only the means' rounding mixes)
             light.env[edge_pixels] += seen_world * spp
         emission_sums[edge_pixels] += seen * spp
         stats["edge_pixels"] += len(edge_pixels)
