@@ -125,7 +125,8 @@ Memory [bytes] (keeps: held until the render ends; working: while the stage runs
                        record of index; working 170 F (centre hits) + W 256 G 500 (gather)
     shadow_photons     keeps 53 count (about two stored per photon at 18.25 B, kd-trees);
                        working 100 count
-    camera             keeps 12 P per image buffer (Combined and each split pass); working
+    camera             keeps 12 P per image buffer (Combined and each split pass), 264 P
+                       for the light passes' sums (11 float64 images) when any is asked; working
                        min(W, blocks) x 640 B per sample of a block + gathers in flight
                        (W min(524288, gathered per batch x G) x 500) + photon look-ups
                        (W 8192 k 60)
@@ -163,6 +164,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from .bsdf import roulette_probabilities
+from .passes import LIGHT_PASS_NAMES
 from .lights import LUMINANCE, area_light_triangles, solid_angle
 from .memory import available_memory
 from .passes import parse_passes
@@ -863,6 +865,8 @@ def estimate_from_facts(facts: SceneFacts, settings, rates: Rates | None = None,
     lookup_work = running * LOOKUP_CHUNK * s.photon_k * NEIGHBOUR_BYTES if photon_lookups else 0
     split = sum(name in wanted for name in ("Emission", "Direct", "Indirect"))
     usage = 16 * P if "CacheUsage" in wanted and plan["irradiance_cache"] else 0
+    if set(wanted) & set(LIGHT_PASS_NAMES):
+        usage += len(LIGHT_PASS_NAMES) * 24 * P
     counts = dict(camera_rays=camera_rays)
     for name, value in (("specular_rays", specular_rays), ("shadow_rays", delta_rays),
                         ("light_samples", light_samples), ("lookups", lookups),

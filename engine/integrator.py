@@ -4,7 +4,9 @@ What it computes
     ``render_camera(context, progress, cancelled)`` -> ``CameraImage``: the Combined image
     (linear radiance [W m^-2 sr^-1], flat (pixels, 3) float32 of the render window, top row
     first), the Emission, Direct and Indirect parts the passes ask for, the Cache usage shares
-    and the batches' summed counters.
+    and the batches' summed counters; with ``CameraContext.light_passes``, Cycles' light
+    passes' sums (``passes.LightSums``: each path's light by its first bounce's kind, the first
+    hit's albedos), nothing of which is computed otherwise.
     ``shade_block(context, index, pixels, camera)``  one batch: ``samples`` rays a pixel
         through the Blackman-Harris filter (``engine/camera.py``); at each hit
         * emission (surfaces and the world seen from the camera or in mirrors);
@@ -58,6 +60,7 @@ from . import sampling
 from .camera import pixel_rays
 from .bsdf import sample_glossy
 from .direct import direct_terms, irradiance_from_terms
+from .passes import DIFFUSE, GLOSSY, LIGHT_PASS_NAMES, TRANSMISSION, LightSums
 from .lights import SphereLight, seen_light_radiance
 from .settings import RenderSettings, camera_blocks
 
@@ -89,6 +92,7 @@ class CameraContext:
     ray_log: list | None = None    # benchmarks: every traced batch of rays
     edges: np.ndarray | None = None   # emitter-edge pixels of the full frame (emitter_edges)
     caustics: object = None        # indirect.CausticEstimate, or None (no caustic map)
+    light_passes: bool = False     # sum Cycles' light passes (``engine/passes.py``)
 
 
 @dataclass
@@ -96,6 +100,7 @@ class CameraImage:
     image: np.ndarray                           # (pixels, 3) float32, the window
     parts: dict = field(default_factory=dict)   # "Emission" / "Direct" / "Indirect" asked for
     usage: np.ndarray | None = None             # (pixels, 2): interpolated, gathered shares
+    light: np.ndarray | None = None             # (11, pixels, 3): LightSums.stacked, or None
     totals: dict = field(default_factory=dict)  # BATCH_COUNTERS summed, batch_seconds
     batches: int = 0
     done: int = 0
@@ -125,6 +130,8 @@ def render_camera(context: CameraContext, wanted_parts, pool, progress=None, can
                       parts={name: np.zeros((pixel_count, 3), np.float32)
                              for name in PART_NAMES if name in wanted_parts},
                       usage=np.zeros((pixel_count, 2)) if context.track_usage else None,
+                      light=np.zeros((len(LIGHT_PASS_NAMES), pixel_count, 3))
+                      if context.light_passes else None,
                       totals={**dict.fromkeys(BATCH_COUNTERS, 0), "batch_seconds": 0.0})
     label = "Rendering" if settings.mode == "full" else "Photon map"
 
@@ -151,7 +158,7 @@ def render_camera(context: CameraContext, wanted_parts, pool, progress=None, can
         finished, _ = wait(list(pending), return_when=FIRST_COMPLETED)
         for future in finished:
             block = pending.pop(future)
-            parts, batch_stats, batch_usage = future.result()
+            parts, batch_stats, batch_usage, batch_light = future.result()
             src, dst = block.source, block.target
             out.image[dst] = (parts[0] + parts[1] + parts[2])[src]
             for index, name in enumerate(PART_NAMES):
@@ -159,6 +166,8 @@ def render_camera(context: CameraContext, wanted_parts, pool, progress=None, can
                     out.parts[name][dst] = parts[index][src]
             if out.usage is not None:
                 out.usage[dst] = batch_usage[src]
+            if out.light is not None:
+                out.light[:, dst] = batch_light[:, src]
             for key in BATCH_COUNTERS:
                 out.totals[key] += batch_stats[key]
             out.totals["batch_seconds"] += batch_stats["seconds"]
@@ -195,6 +204,8 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
     emission_sums, direct_sums, indirect_sums = parts
     # Cache usage pass: per pixel, samples interpolated from records and samples gathered.
     usage = np.zeros((pixels, 2)) if context.track_usage else None
+    # Cycles' light passes: each path's contributions by its first bounce's kind.
+    light = LightSums(pixels, spp) if context.light_passes else None
     follows = materials.has_specular or materials.has_glossy
     throughput = np.ones((count, 3), np.float32) if follows else None
     # Per ray: whether emissive meshes it hits count (False after a glossy lobe that took
@@ -238,6 +249,8 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
                                         t_seen)
             add_to_pixels(emission_sums, ray_of[d_rays] // spp,
                           glint * throughput[d_rays])
+            if light is not None:
+                light.add(ray_of[d_rays], glint * throughput[d_rays], direct=depth == 1)
         all_hit = bool(hit.all())
         if not all_hit and not scene.world.is_black:
             missed = np.broadcast_to(world, (int((~hit).sum()), 3)) if throughput is None \
@@ -246,6 +259,11 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
                 missed = missed * own_emission[ray_of[~hit]][:, None]
 
             add_to_pixels(emission_sums, ray_of[~hit] // spp, missed)
+            if light is not None:
+                if depth == 0:
+                    light.add_seen(ray_of[~hit], missed, world=True)
+                else:
+                    light.add(ray_of[~hit], missed, direct=depth == 1)
         if not hit.any():
             break
         if not all_hit:
@@ -272,6 +290,11 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
             if collecting is not None:
                 emitted *= collecting[:, None]
             add_to_pixels(emission_sums, pixel_of, emitted if thr is None else thr * emitted)
+            if light is not None:
+                if depth == 0:
+                    light.add_seen(rays, emitted if thr is None else thr * emitted, world=False)
+                else:
+                    light.add(rays, thr * emitted, direct=depth == 1)
         if probing is not None and probing.any():
             shaded = np.flatnonzero(~probing)
             if len(shaded) == 0:
@@ -285,9 +308,13 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
 
         glossy = None
         if materials.has_glossy:
-            glossy = _GlossyHits(materials, surface, -d, ns, front)
+            glossy = _GlossyHits(materials, surface, -d, ns, front,
+                                 split=light is not None and depth == 0)
             if glossy.count == 0:
                 glossy = None
+
+        if light is not None and depth == 0:
+            _first_hit_colors(light, rays, surface, glossy)
 
         diffuse = surface.is_diffuse
         if diffuse.all():
@@ -318,24 +345,36 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
                     # Glossy lobes at hits where the path ends: their indirect light from the
                     # same irradiance, as if it came evenly from the hemisphere.
                     e_glossy = glossy.ending_albedo[ask] * e / np.pi
+                    if light is not None and depth == 0:
+                        e_through = glossy.ending_transmitted[ask] * e / np.pi
                 e *= surface.diffuse_over_pi[ask]
                 if glossy is not None:
                     e *= glossy.diffuse_factor[ask][:, None]
+                    if light is not None and depth == 0:
+                        light.add(rays[ask], e, direct=False, kind=DIFFUSE)
                     if direct_light:
                         e += e_glossy
+                        if light is not None and depth == 0:
+                            light.add(rays[ask], e_glossy - e_through, direct=False,
+                                      kind=GLOSSY)
+                            light.add(rays[ask], e_through, direct=False, kind=TRANSMISSION)
+                elif light is not None and depth == 0:
+                    light.add(rays[ask], e, direct=False, kind=DIFFUSE)
                 if depth > 0:
                     e *= thr[ask]
+                    if light is not None:
+                        light.add(rays[ask], e, direct=False)
                 add_to_pixels(indirect_sums, rays[ask] // spp, e)
         if idx is not None and direct_light and context.caustics is not None:
             _shade_caustics(context, stats, idx, x, ns, surface, glossy, thr, rays, spp,
-                            depth, indirect_sums)
+                            depth, indirect_sums, light)
         if idx is not None and direct_light:
             _shade_direct(context, stats, rng, depth, idx, x, ns, ng, surface, thr, rays,
                           pixel_of, direct_sums,
-                          None if glossy is None else glossy.diffuse_factor)
+                          None if glossy is None else glossy.diffuse_factor, light)
         if glossy is not None:
             _shade_glossy_direct(context, stats, rng, glossy, x, ns, ng, thr, rays, spp,
-                                 direct_sums)
+                                 direct_sums, light, depth)
 
         if not follows:
             break
@@ -379,9 +418,19 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
         tmax = None
         throughput = thr[idx] * weight
         ray_of = rays[idx]
+        if light is not None and depth == 0:
+            # The first bounce's kind: through the surface (glass refracting) Transmission,
+            # else (mirror, glossy lobes, glass reflecting) Glossy.
+            through = sampling.dot_rows(directions, ns[idx]) < 0
+            light.kind_of[ray_of] = np.where(through, TRANSMISSION, GLOSSY)
 
     if edge_pixels is not None:
-        seen, traced = edge_emission(context, camera, batch, edge_pixels)
+        seen, traced = edge_emission(context, camera, batch, edge_pixels,
+                                     split=light is not None)
+        if light is not None:
+            seen, seen_world = seen
+            light.emit[edge_pixels] += (seen - seen_world) * spp
+            light.env[edge_pixels] += seen_world * spp
         emission_sums[edge_pixels] += seen * spp
         stats["edge_pixels"] += len(edge_pixels)
         stats["edge_rays"] += traced
@@ -389,7 +438,7 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
     if usage is not None:
         usage /= spp
     stats["seconds"] = time.perf_counter() - started
-    return parts, stats, usage
+    return parts, stats, usage, None if light is None else light.stacked()
 
 
 def emitter_edges(scene, accel, surfaces, filter_width: float):
@@ -430,9 +479,9 @@ def emitter_edges(scene, accel, surfaces, filter_width: float):
     return hi > lo
 
 
-def _seen_emission(scene, accel, surfaces, origins, directions, tmax):
+def _seen_emission(scene, accel, surfaces, origins, directions, tmax, split=False):
     """Radiance (N, 3) the rays see first: an emitter's (on its emitting side) or the world's
-    where they miss; 0 on other surfaces."""
+    where they miss; 0 on other surfaces. ``split``: also the world's part alone."""
     _t, prim, _bu, _bv = accel.intersect(origins, directions, tmax)
     out = np.zeros((len(origins), 3))
     hit = prim >= 0
@@ -444,29 +493,36 @@ def _seen_emission(scene, accel, surfaces, origins, directions, tmax):
                                   directions[hit]) < 0
         surface = surfaces.params(p)
         out[hit] = surface.emitted_radiance * (front | surface.both_sides)[:, None]
+    if split:
+        return out, np.where(hit[:, None], 0.0, out)
     return out
 
 
-def edge_emission(context: CameraContext, camera, batch: int, pixels: np.ndarray):
+def edge_emission(context: CameraContext, camera, batch: int, pixels: np.ndarray,
+                  split: bool = False):
     """Mean emission seen (``_seen_emission``) over ``EDGE_SAMPLES_FACTOR`` x samples of the
     block's pixels ``pixels``, with the pixel filter, from the batch's own stream
-    (``STREAM_EDGE``): (P, 3) and the rays traced."""
+    (``STREAM_EDGE``): (P, 3) and the rays traced; ``split``: (P, 3) pairs (all, the
+    world's part) instead of the (P, 3)."""
     settings = context.settings
     m = EDGE_SAMPLES_FACTOR * settings.samples
     rng = sampling.rng_for(settings.seed, sampling.STREAM_EDGE, batch)
     origins, directions, tmax = pixel_rays(camera, 0, 0, m, rng, settings.filter_width,
                                            pixels=pixels)
     seen = _seen_emission(context.scene, context.accel, context.surfaces, origins, directions,
-                          tmax)
+                          tmax, split)
+    if split:
+        seen, world = (a.reshape(len(pixels), m, 3).mean(axis=1) for a in seen)
+        return (seen, world), len(origins)
     return seen.reshape(len(pixels), m, 3).mean(axis=1), len(origins)
 
 
 def _shade_caustics(context, stats, idx, x, ns, surface, glossy, thr, rays, spp, depth,
-                    indirect_sums):
+                    indirect_sums, light=None):
     """Caustics at the diffuse hits ``idx``: the caustic map's irradiance (light that reached
     them through specular surfaces, ``indirect.CausticEstimate``) x rho_d / pi (below a
     Principled layer: x its diffuse share), plus, at glossy hits where the path ends, x their
-    glossy albedo / pi; summed into the Indirect part."""
+    glossy albedo / pi; summed into the Indirect part (and ``light``'s Indirect passes)."""
     ask = idx if isinstance(idx, np.ndarray) else np.arange(len(x))
     t0 = time.perf_counter()
     e = context.caustics.irradiance(x[ask], ns[ask], stats)
@@ -478,16 +534,27 @@ def _shade_caustics(context, stats, idx, x, ns, surface, glossy, thr, rays, spp,
     value = e * surface.diffuse_over_pi[at]
     if glossy is not None:
         value *= glossy.diffuse_factor[at][:, None]
+        if light is not None and depth == 0:
+            light.add(rays[at], value, direct=False, kind=DIFFUSE)
+            through = glossy.ending_transmitted[at] * e / np.pi
+            light.add(rays[at], glossy.ending_albedo[at] * e / np.pi - through, direct=False,
+                      kind=GLOSSY)
+            light.add(rays[at], through, direct=False, kind=TRANSMISSION)
         value += glossy.ending_albedo[at] * e / np.pi
+    elif light is not None and depth == 0:
+        light.add(rays[at], value, direct=False, kind=DIFFUSE)
     if depth > 0:
         value *= thr[at]
+        if light is not None:
+            light.add(rays[at], value, direct=False)
     add_to_pixels(indirect_sums, rays[at] // spp, value)
 
 
 def _shade_direct(context, stats, rng, depth, idx, x, ns, ng, surface, thr, rays, pixel_of,
-                  direct_sums, diffuse_factor=None):
+                  direct_sums, diffuse_factor=None, light=None):
     """Direct light at the diffuse hits ``idx``: rho_d / pi times the irradiance of
-    ``direct.direct_terms``, summed into the pixels. Primary hits of a scene whose materials
+    ``direct.direct_terms``, summed into the pixels (and into ``light``'s passes: Diffuse
+    Direct at the first hit, the path's kind's Indirect after). Primary hits of a scene whose materials
     are constant per material (no textures) sum each term's scalar weights in a (pixel,
     material) histogram and multiply by the materials' rho_d / pi once, instead of per hit."""
     settings, materials = context.settings, context.surfaces.materials
@@ -514,7 +581,10 @@ def _shade_direct(context, stats, rng, depth, idx, x, ns, ng, surface, thr, rays
                 scalar = scalar * (factor if target is None else factor[target])
             hist = np.bincount(key if target is None else key[target], weights=scalar,
                                minlength=len(direct_sums) * count)
-            direct_sums += hist.reshape(-1, count) @ (materials.diffuse_over_pi * rgb)
+            value = hist.reshape(-1, count) @ (materials.diffuse_over_pi * rgb)
+            direct_sums += value
+            if light is not None:
+                light.light[DIFFUSE, 0] += value
     elif terms:
         e = irradiance_from_terms(terms, len(x[idx]))
         e *= surface.diffuse_over_pi[idx]
@@ -524,6 +594,8 @@ def _shade_direct(context, stats, rng, depth, idx, x, ns, ng, surface, thr, rays
             e *= thr[idx]
         in_order = pixel_of is None and isinstance(idx, slice)
         add_to_pixels(direct_sums, None if in_order else (rays // spp)[idx], e)
+        if light is not None:
+            light.add(rays[idx], e, direct=depth == 0, kind=DIFFUSE if depth == 0 else None)
 
 
 class _GlossyHits:
@@ -542,9 +614,11 @@ class _GlossyHits:
     the hits where the path goes on, ``group_of`` / ``row_of`` (N,) each hit's material group
     and its row in that group's lobes, ``diffuse_factor`` (N,) the share of the diffuse below a Principled
     specular layer (1 elsewhere), ``ending_albedo`` (N, 3) the glossy albedo at ending hits
-    (0 elsewhere)."""
+    (0 elsewhere). With ``split`` (the light passes): ``reflected`` / ``transmitted`` (N, 3)
+    the lobes' albedo by branch (glass lobes split, ``lobes.SmoothGlass.albedo_split``) and
+    ``ending_transmitted`` (N, 3) the transmitted part of ``ending_albedo``."""
 
-    def __init__(self, materials, surface, wo, n, front=None):
+    def __init__(self, materials, surface, wo, n, front=None, split: bool = False):
         count = len(surface)
         self.front = np.ones(count, bool) if front is None else np.asarray(front, bool)
         self.mask = surface.camera_glossy
@@ -553,6 +627,10 @@ class _GlossyHits:
         self.diffuse_factor = np.ones(count)
         self.ending_albedo = np.zeros((count, 3))
         self.goes_on = np.zeros(count, bool)
+        if split:
+            self.reflected = np.zeros((count, 3))
+            self.transmitted = np.zeros((count, 3))
+            self.ending_transmitted = np.zeros((count, 3))
         self.wo, self.n = wo, n
         self.materials = materials
         self.material_ids = surface.material[self.index]
@@ -577,6 +655,15 @@ class _GlossyHits:
             self.goes_on[hits] = goes_on
             self.ending_albedo[hits] = albedo * ~goes_on[:, None]
             self.groups.append((hits, lobes))
+            if split:
+                for w, lobe, _ in lobes:
+                    if hasattr(lobe, "albedo_split"):
+                        r, t = lobe.albedo_split(wo_h, n_h)
+                    else:
+                        r, t = lobe.albedo(wo_h, n_h), 0.0
+                    self.reflected[hits] += w[None, :] * r
+                    self.transmitted[hits] += w[None, :] * t
+                self.ending_transmitted[hits] = self.transmitted[hits] * ~goes_on[:, None]
 
     def sample(self, rng):
         """One ray per glossy hit, in the order of ``index`` (``bsdf.sample_glossy``):
@@ -617,9 +704,12 @@ class _GlossyHits:
         return f
 
 
-def _shade_glossy_direct(context, stats, rng, glossy, x, ns, ng, thr, rays, spp, direct_sums):
+def _shade_glossy_direct(context, stats, rng, glossy, x, ns, ng, thr, rays, spp, direct_sums,
+                         light=None, depth=0):
     """Direct light reflected by the glossy lobes: light samples at the glossy hits
-    (``direct.direct_terms`` with their directions), each weighted by the lobes' f."""
+    (``direct.direct_terms`` with their directions), each weighted by the lobes' f (into
+    ``light``'s passes: Glossy Direct at the first hit ``depth`` 0, where light samples reach
+    only the reflection side; the path's kind's Indirect after)."""
     settings = context.settings
     idx = glossy.index
     shadow_stats = {}
@@ -641,3 +731,19 @@ def _shade_glossy_direct(context, stats, rng, glossy, x, ns, ng, thr, rays, spp,
     if thr is not None:
         radiance *= thr[idx]
     add_to_pixels(direct_sums, rays[idx] // spp, radiance)
+    if light is not None:
+        light.add(rays[idx], radiance, direct=depth == 0, kind=GLOSSY if depth == 0 else None)
+
+
+def _first_hit_colors(light, rays, surface, glossy):
+    """The Color passes' albedos at the first hits (samples ``rays``): Diffuse rho_d (x the
+    share under a Principled layer), Glossy the seed's mirror rho_s or the glossy lobes'
+    reflected albedo, Transmission the glass lobes' transmitted albedo."""
+    diffuse = surface.diffuse
+    specular = surface.specular
+    if glossy is not None:
+        diffuse = diffuse * glossy.diffuse_factor[:, None]
+        specular = np.where(glossy.mask[:, None], glossy.reflected, specular)
+        light.add_color(rays, TRANSMISSION, glossy.transmitted)
+    light.add_color(rays, DIFFUSE, diffuse)
+    light.add_color(rays, GLOSSY, specular)

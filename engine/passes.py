@@ -32,8 +32,73 @@ What it computes
                                       because no record covered them (red)
     ==============  ===============  ======================================================
 
+    Cycles' light passes (below), summed by the camera stage: by the
+    kind of each path's first bounce (Diff: diffuse; Gloss: glossy lobes, mirrors and glass
+    reflecting; Trans: glass transmitting), light after one bounce (Dir) and after more
+    (Ind), each divided by the first hit's albedo of that kind (Col), as Cycles writes them:
+
+    =====================  ========  ===============================================
+    ``--passes``           pass      what it shows
+    =====================  ========  ===============================================
+    diffuse-direct         DiffDir   diffuse first bounce, light after one bounce / DiffCol
+    diffuse-indirect       DiffInd   diffuse first bounce, light after more / DiffCol
+    diffuse-color          DiffCol   first hit's rho_d (x share under a Principled layer)
+    glossy-direct          GlossDir  as Diff*, glossy first bounce
+    glossy-indirect        GlossInd
+    glossy-color           GlossCol  first hit's reflected albedo (glossy lobes, rho_s)
+    transmission-direct    TransDir  as Diff*, glass transmitting at the first bounce
+    transmission-indirect  TransInd
+    transmission-color     TransCol  first hit's transmitted albedo (glass lobes)
+    emit                   Emit      emitters seen from the camera (Cycles' Emission)
+    environment            Env       the world seen from the camera (Cycles' Environment)
+    =====================  ========  ===============================================
+
     Combined = Direct + Indirect + Emission (to float rounding) in ``full`` mode; in
     ``photon-map`` mode Combined = PhotonMap-like estimate (held in Indirect) + Emission.
+    Combined = (DiffDir + DiffInd) DiffCol + (GlossDir + GlossInd) GlossCol + (TransDir +
+    TransInd) TransCol + Emit + Env (to float rounding), Cycles' split; Lanterna's own
+    Direct / Indirect / Emission split by estimator instead (emitters seen in mirrors are
+    Emission there, Glossy Direct here).
+
+Cycles' light passes (issue 23, item 5)
+    Each camera path carries a label, the kind of its first bounce (``DIFFUSE`` 0,
+    ``GLOSSY`` 1, ``TRANSMISSION`` 2), and every contribution the path makes goes to that
+    kind, as in Cycles (``kernel/film/light_passes.h``):
+
+    * light that reaches the camera after exactly one bounce is Direct: at the first hit,
+      the direct light of light samples (diffuse: Diffuse; glossy lobes: Glossy), and the
+      emitters, lights' glints and the world met by the ray that leaves the first hit
+      (a mirror, glossy or glass ray: Glossy, or Transmission where it went through);
+    * everything later is Indirect: the indirect estimate and caustics at the first hit
+      (the diffuse part: Diffuse; the glossy lobes' part where the path ends there, by
+      each lobe's albedo: Glossy for reflection, Transmission for what glass passes),
+      and all light shaded at the second and later hits (Glossy or Transmission after a
+      mirror, glossy or glass first bounce);
+    * emitters seen from the camera go to Emit, the world seen from the camera to Env.
+
+    The Color passes are the first hit's albedo per kind (Cycles' ``surface_shader_diffuse``
+    / ``_glossy`` / ``_transmission``), mean over a pixel's samples: Diffuse rho_d times the
+    share left under a Principled specular layer; Glossy the reflection lobes' directional
+    albedo at wo (metal, Glossy, the Principled layer, glass's reflected branch) plus the
+    seed's mirror rho_s; Transmission the glass lobes' transmitted albedo. As Cycles writes
+    them, the Direct and Indirect passes are the light divided by the Color (0 where the
+    Color is 0), so that, to float rounding,
+
+        Combined = sum over kinds of (Dir + Ind) x Col + Emit + Env.
+
+    In ``photon-map`` mode the photon map's estimate at a diffuse first hit (all its light)
+    goes to Diffuse Indirect. Light samples at a glossy hit reach only its reflection side,
+    so Transmission Direct holds the emitters and world seen through glass in one crossing.
+
+    ``LIGHT_PASSES`` maps ``--passes`` names to pass names (Blender's own: ``DiffDir``,
+    ``DiffInd``, ``DiffCol``, ``GlossDir`` ... ``TransCol``, ``Emit``, ``Env``);
+    ``LightSums(pixels, samples)`` collects one camera batch ((pixels, 3) sums, radiance
+    [W m^-2 sr^-1] x samples, colours x samples); ``light_pass_images`` divides them into
+    the passes.
+
+    Cost: nothing when no light pass is asked for (the camera then makes no ``LightSums``):
+    when asked, one label per path, the glass lobes' albedo split at the first hit, and a
+    few (pixels, 3) sums.
 
 Parameters
     ``hits``: ``CentreHits`` of the pixel centres (one ray per pixel through its centre);
@@ -52,6 +117,19 @@ import numpy as np
 from .camera import pixel_rays
 from .shadow_photons import LIT, PENUMBRA, UMBRA
 
+DIFFUSE, GLOSSY, TRANSMISSION = 0, 1, 2
+KIND_PREFIX = ("Diff", "Gloss", "Trans")
+KIND_WORDS = ("diffuse", "glossy", "transmission")
+DIRECT, INDIRECT = 0, 1
+
+# --passes name -> pass name (Cycles' / Blender's render pass names)
+LIGHT_PASSES = {f"{word}-{part}": f"{prefix}{suffix}"
+                for word, prefix in zip(KIND_WORDS, KIND_PREFIX)
+                for part, suffix in (("direct", "Dir"), ("indirect", "Ind"), ("color", "Col"))}
+LIGHT_PASSES.update({"emit": "Emit", "environment": "Env"})
+LIGHT_PASS_NAMES = tuple(LIGHT_PASSES.values())
+
+
 PASSES = {
     "direct": "Direct",
     "indirect": "Indirect",
@@ -61,6 +139,7 @@ PASSES = {
     "photons": "Photons",
     "shadow-classes": "ShadowClasses",
     "cache-usage": "CacheUsage",
+    **LIGHT_PASSES,
 }
 PASS_NAMES = tuple(PASSES.values())
 VISIBLE_TOLERANCE = 1e-3
@@ -261,3 +340,73 @@ def cache_usage_image(usage: np.ndarray | None, shape) -> np.ndarray:
         image[asked, 1] = usage[asked, 0] / total[asked]
         image[asked, 0] = usage[asked, 1] / total[asked]
     return image.reshape(h, w, 3)
+
+
+# -- Cycles' light passes (issue 23, item 5) ----------------------------------------------
+class LightSums:
+    """One camera batch's sums for the light passes: ``light`` (kind, Direct/Indirect,
+    pixels, 3), ``color`` (kind, pixels, 3), ``emit`` and ``env`` (pixels, 3); each
+    contribution added per sample (pixel = sample // samples). ``kind_of`` (samples,) is
+    each path's first-bounce kind, set when the path leaves its first hit."""
+
+    def __init__(self, pixels: int, samples: int):
+        self.samples = samples
+        self.light = np.zeros((3, 2, pixels, 3))
+        self.color = np.zeros((3, pixels, 3))
+        self.emit = np.zeros((pixels, 3))
+        self.env = np.zeros((pixels, 3))
+        self.kind_of = np.zeros(pixels * samples, np.int8)
+
+    def _add(self, target, sample, values):
+        pixel = np.asarray(sample) // self.samples
+        for c in range(3):
+            target[:, c] += np.bincount(pixel, weights=values[:, c], minlength=len(target))
+
+    def add(self, sample, values, direct: bool, kind=None):
+        """Add ``values`` (n, 3) of samples ``sample`` (n,) to Direct (``direct``) or
+        Indirect of ``kind`` (an int for all) or, None, of each path's own ``kind_of``."""
+        slot = DIRECT if direct else INDIRECT
+        if len(values) == 0:
+            return
+        if kind is not None:
+            self._add(self.light[kind, slot], sample, values)
+            return
+        kinds = self.kind_of[sample]
+        for k in range(3):
+            sel = kinds == k
+            if sel.any():
+                self._add(self.light[k, slot], sample[sel], values[sel])
+
+    def add_color(self, sample, kind: int, values):
+        """The first hit's albedo ``values`` (n, 3) of ``kind`` at samples ``sample``."""
+        self._add(self.color[kind], sample, values)
+
+    def add_seen(self, sample, values, world: bool):
+        """Emitters (``world`` False: Emit) or the world (Env) seen from the camera."""
+        self._add(self.env if world else self.emit, sample, values)
+
+    def stacked(self) -> np.ndarray:
+        """The sums as one (11, pixels, 3) array, in the order of ``LIGHT_PASS_NAMES``
+        before division (Dir, Ind, Col per kind, then Emit, Env), divided by samples."""
+        rows = []
+        for k in range(3):
+            rows += [self.light[k, DIRECT], self.light[k, INDIRECT], self.color[k]]
+        return np.stack(rows + [self.emit, self.env]) / self.samples
+
+
+def light_pass_images(stacked: np.ndarray, wanted) -> dict:
+    """(11, pixels, 3) means (``LightSums.stacked``) -> {pass name: (pixels, 3) float32} for
+    the names of ``wanted``: Dir and Ind divided by Col per channel, 0 where Col is 0."""
+    out = {}
+    for k, prefix in enumerate(KIND_PREFIX):
+        direct, indirect, color = stacked[3 * k: 3 * k + 3]
+        for suffix, value in (("Dir", direct), ("Ind", indirect)):
+            if f"{prefix}{suffix}" in wanted:
+                out[f"{prefix}{suffix}"] = np.divide(
+                    value, color, out=np.zeros_like(value), where=color > 0).astype(np.float32)
+        if f"{prefix}Col" in wanted:
+            out[f"{prefix}Col"] = color.astype(np.float32)
+    for index, name in ((9, "Emit"), (10, "Env")):
+        if name in wanted:
+            out[name] = stacked[index].astype(np.float32)
+    return out

@@ -29,6 +29,7 @@ import numpy as np
 from .artifacts import Artifacts
 from .estimate import preflight
 from .integrator import PART_NAMES, CameraContext, render_camera
+from .passes import LIGHT_PASS_NAMES, light_pass_images
 from .passes import diagnostic_passes, parse_passes
 from .preparation import prepare
 from .scene import Scene
@@ -67,14 +68,19 @@ def render(scene: Scene, settings: RenderSettings | None = None, progress=None, 
         context = CameraContext(scene, maps.surfaces, maps.accel, maps.lights, camera_settings,
                                 indirect=maps.indirect, shadow_map=maps.shadow_map,
                                 track_usage="CacheUsage" in wanted and maps.cache is not None,
-                                ray_log=ray_log, caustics=maps.caustics)
+                                ray_log=ray_log, caustics=maps.caustics,
+                                light_passes=bool(set(wanted) & set(LIGHT_PASS_NAMES)))
         camera = render_camera(context, wanted, maps.pool, progress, cancelled,     # 9
                                skip=maps.cancelled)
         report.camera_entry(camera)
         report.cache_usage(maps.cache, settings.samples)
         height, width = scene.camera.window_size[::-1]
         images = {name: camera.parts[name].reshape(height, width, 3) for name in camera.parts}
-        diagnostic = [name for name in wanted if name not in PART_NAMES]
+        if camera.light is not None:
+            images.update({name: image.reshape(height, width, 3) for name, image in
+                           light_pass_images(camera.light, wanted).items()})
+        diagnostic = [name for name in wanted
+                      if name not in PART_NAMES and name not in LIGHT_PASS_NAMES]
         was_cancelled = maps.cancelled or camera.cancelled
         if diagnostic and not was_cancelled:                                          # 10
             with report.timed("passes", passes=list(wanted)):

@@ -439,6 +439,43 @@ def test_passes_reach_the_render_result(registered, tmp_path):
         "Direct", "Indirect", "Emission", "CachePoints"]
 
 
+def test_cycles_light_passes_reach_the_render_result(registered, tmp_path):
+    """Blender's own view-layer flags (use_pass_diffuse_direct ... use_pass_environment) make
+    Cycles' light passes under Cycles' names, and they sum to Combined."""
+    from lanterna.engine.passes import LIGHT_PASS_NAMES
+    from lanterna.ui.render_passes import LIGHT_PASS_FLAGS
+    scene = upper_wall_scene(samples=2)
+    layer = bpy.context.view_layer
+    for flag in LIGHT_PASS_FLAGS.values():
+        setattr(layer, flag, True)
+    fmt = scene.render.image_settings
+    if hasattr(fmt, "media_type"):
+        fmt.media_type = 'MULTI_LAYER_IMAGE'
+    fmt.file_format = 'OPEN_EXR_MULTILAYER'
+    scene.render.filepath = str(tmp_path / "light.exr")
+    scene.render.use_file_extension = False
+    try:
+        bpy.ops.render.render(write_still=True)
+    finally:
+        for flag in LIGHT_PASS_FLAGS.values():
+            setattr(layer, flag, False)
+    channels = imageio.read_exr(tmp_path / "light.exr")
+    name = layer.name
+
+    def image(pass_name):
+        return np.stack([channels[f"{name}.{pass_name}.{c}"] for c in "RGB"], axis=-1)
+
+    for pass_name in LIGHT_PASS_NAMES:
+        for c in "RGB":
+            assert f"{name}.{pass_name}.{c}" in channels, sorted(channels)
+    total = image("Emit") + image("Env")
+    for kind in ("Diff", "Gloss", "Trans"):
+        total = total + (image(kind + "Dir") + image(kind + "Ind")) * image(kind + "Col")
+    np.testing.assert_allclose(total, image("Combined"), rtol=1e-4, atol=1e-4)
+    assert image("DiffDir").max() > 0 and image("DiffCol").max() > 0
+    assert render_engine.LAST_RENDER["report"]["passes"] == list(LIGHT_PASS_NAMES)
+
+
 def test_f12_reuses_kept_maps_only_for_the_same_scene(registered, tmp_path):
     """A second F12 with only the samples changed reuses the first render's maps (same
     fingerprint) and equals a fresh render; moving the light builds them afresh."""

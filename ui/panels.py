@@ -700,6 +700,17 @@ class LANTERNA_VIEW_LAYER_PT_passes(LanternaPanel, bpy.types.Panel):
         col = layout.column(heading="Method", align=True)
         for prop in ("photon_map", "photons", "cache_points", "cache_usage", "shadow_classes"):
             col.prop(settings, prop)
+        # Cycles' light passes: Blender's own view-layer flags (ui/render_passes.py).
+        view_layer = context.view_layer
+        for heading, word in (("Diffuse", "diffuse"), ("Glossy", "glossy"),
+                              ("Transmission", "transmission")):
+            row = layout.row(heading=heading, align=True)
+            for part, label in (("direct", "Direct"), ("indirect", "Indirect"),
+                                ("color", "Color")):
+                row.prop(view_layer, f"use_pass_{word}_{part}", text=label, toggle=True)
+        col = layout.column(heading="Other", align=True)
+        col.prop(view_layer, "use_pass_emit", text="Emission")
+        col.prop(view_layer, "use_pass_environment", text="Environment")
 
 
 

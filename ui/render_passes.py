@@ -2,7 +2,11 @@
 
 ``ViewLayer.lanterna_passes`` (:class:`LanternaPassSettings`) holds one checkbox per pass of
 ``engine/passes.py`` (Direct, Indirect, Emission, PhotonMap, CachePoints, Photons,
-ShadowClasses, CacheUsage; all off by default, so a plain render makes only Combined). The
+ShadowClasses, CacheUsage; all off by default, so a plain render makes only Combined).
+Cycles' light passes (``engine/passes.py``: DiffDir, DiffInd, DiffCol, GlossDir,
+GlossInd, GlossCol, TransDir, TransInd, TransCol, Emit, Env) follow Blender's own view-layer
+flags, as Cycles' do (``ViewLayer.use_pass_diffuse_direct`` ... ``use_pass_environment``,
+``LIGHT_PASS_FLAGS``; off by default). The
 RenderEngine registers the ticked ones in ``update_render_passes`` (they then appear in the
 Image Editor's pass menu, in the compositor's Render Layers node and in multilayer EXRs, as
 Cycles' passes do) and fills them after the render. The checkboxes sit in View Layer
@@ -15,6 +19,7 @@ from __future__ import annotations
 import bpy
 from bpy.props import BoolProperty
 
+from ..engine.passes import LIGHT_PASS_NAMES
 from ..engine.passes import PASS_NAMES, PASSES
 
 # property name -> (pass name, label, description)
@@ -31,7 +36,15 @@ PASS_PROPERTIES = {
     "cache_usage": ("CacheUsage", "Cache Usage",
                     "Share of look-ups interpolated from records (green) and gathered (red)"),
 }
-assert tuple(p[0] for p in PASS_PROPERTIES.values()) == PASS_NAMES
+# pass name -> Blender's ViewLayer flag (Cycles' light passes)
+LIGHT_PASS_FLAGS = {f"{prefix}{suffix}": f"use_pass_{word}_{part}"
+                    for prefix, word in (("Diff", "diffuse"), ("Gloss", "glossy"),
+                                         ("Trans", "transmission"))
+                    for suffix, part in (("Dir", "direct"), ("Ind", "indirect"),
+                                         ("Col", "color"))}
+LIGHT_PASS_FLAGS.update({"Emit": "use_pass_emit", "Env": "use_pass_environment"})
+assert tuple(LIGHT_PASS_FLAGS) == LIGHT_PASS_NAMES
+assert tuple(p[0] for p in PASS_PROPERTIES.values()) + LIGHT_PASS_NAMES == PASS_NAMES
 assert set(PASSES.values()) == set(PASS_NAMES)
 
 
@@ -53,11 +66,14 @@ LanternaPassSettings = type("LanternaPassSettings", (bpy.types.PropertyGroup,),
 
 
 def enabled_passes(view_layer) -> list[str]:
-    """Pass names (``engine/passes.py``) ticked on ``view_layer``."""
+    """Pass names (``engine/passes.py``) ticked on ``view_layer``: Lanterna's checkboxes,
+    then Cycles' light passes whose Blender flag is on."""
     settings = getattr(view_layer, "lanterna_passes", None)
     if settings is None:
         return []
-    return [name for prop, (name, _l, _d) in PASS_PROPERTIES.items() if getattr(settings, prop)]
+    names = [name for prop, (name, _l, _d) in PASS_PROPERTIES.items() if getattr(settings, prop)]
+    return names + [name for name, flag in LIGHT_PASS_FLAGS.items()
+                    if getattr(view_layer, flag, False)]
 
 
 def register():

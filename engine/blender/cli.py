@@ -258,7 +258,9 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--passes", type=_passes, metavar="LIST", default=(),
                         help="extra passes written as EXR layers (Direct.R, ...): comma-separated "
                              "from direct, indirect, emission, photon-map, cache-points, photons, "
-                             "shadow-classes, cache-usage, or all")
+                             "shadow-classes, cache-usage, Cycles' light passes diffuse-direct, "
+                             "diffuse-indirect, diffuse-color, glossy-/transmission- the same, "
+                             "emit, environment (or their names DiffDir, ...), or all")
     render.add_argument("--maps", metavar="MAPS.npz",
                         help="render with maps baked before (lanterna bake) for this scene and "
                              "these map settings instead of building them")

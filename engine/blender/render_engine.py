@@ -19,8 +19,9 @@
    fingerprint matches this scene and these map settings (the picture is the same); the
    render's maps are then kept in ``engine/blender/session.py`` for the viewport overlay.
 4. The (H, W, 3) image, row 0 = top, goes into the Combined pass as RGBA with rows bottom-up;
-   the passes ticked in ``ViewLayer.lanterna_passes`` (``ui/render_passes.py``), registered in
-   ``update_render_passes``, go into theirs as RGB.
+   the passes ticked in ``ViewLayer.lanterna_passes`` and Cycles' light passes whose Blender
+   flag is on (``use_pass_diffuse_direct`` ...: DiffDir ... Env; ``ui/render_passes.py``),
+   registered in ``update_render_passes``, go into theirs as RGB.
 
 Errors stop at this boundary: ``report({'ERROR'})`` + ``error_set`` with a one-line message,
 the traceback (for unexpected errors only) to stderr after a ``lanterna: render failed:``
