@@ -91,7 +91,9 @@ Photons per light
 Storage: 16 bytes a photon (``stats["bytes_per_photon"]``): float32 position (12), the
 incoming direction in an octahedral map quantised to two int8 (2; about 1 degree, enough for
 the side test), the light index (1 byte; 2 when a scene has more than 256 sampled lights) and
-the number of surfaces crossed before it (1 byte, 0 = direct, saturating at 255). The seed
+the number of surfaces crossed before it (1 byte, 0 = direct, at most 254; 255 =
+``THROUGH_GLASS``: one of them was transmissive, and a point whose neighbourhood holds such a
+photon is PENUMBRA, so points behind glass are traced and never called UMBRA). The seed
 used 14 (no direction). Photons are sorted by light, then along a Morton curve inside each
 light, so each light's kd-tree covers one contiguous slice. Representatives add 9 bytes each
 (int32 photon index, int8 class, float32 radius: 2.25 bytes a photon at stride 4), counted in
@@ -109,6 +111,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import sampling
+from .bsdf import MaterialTable
 from .lights import LUMINANCE, EllipseEmitter, TriangleEmitter
 from .npzjson import pack_json, unpack_json
 from .photons import column_bounds, morton_order
@@ -127,6 +130,9 @@ AUTO_SPACING = 0.01               # neighbourhood radius aimed at, as a share of
 MIN_AUTO_COUNT = 100_000
 MAX_AUTO_COUNT = 1_000_000
 MAX_CROSSINGS = 64
+# ``crossings`` of a photon that crossed a transmissive (glass) surface before it: such a
+# photon makes its neighbourhood PENUMBRA, so points behind glass are traced, never UMBRA.
+THROUGH_GLASS = 255
 CLASSIFY_CHUNK = 8192
 REP_STRIDE = 4                    # every 4th photon carries a precomputed class
 LOOKUP_K = 4                      # representatives asked per shading point
@@ -215,13 +221,15 @@ def _emit(light, n: int, rng: np.random.Generator, accel):
 
 
 # Tracing through surfaces --------------------------------------------------------------------
-def _trace_through(accel, normals_geo, origins, directions, max_crossings):
+def _trace_through(accel, normals_geo, origins, directions, max_crossings, transmissive=None):
     """Follow each ray through every surface on its line. Returns, per stored hit, the hit
-    point (float32), the ray's index, the number of surfaces crossed before it and the
+    point (float32), the ray's index, the number of surfaces crossed before it
+    (``THROUGH_GLASS`` once one of them was a triangle marked in ``transmissive``) and the
     triangle hit; then the rays traced and the photons dropped at ``max_crossings``."""
     o = np.ascontiguousarray(origins, np.float32)
     d = np.ascontiguousarray(directions, np.float32)
     ray = np.arange(len(o), dtype=np.int64)
+    through = np.zeros(len(o), bool)
     depth = 0
     points, rays, crossed, prims = [], [], [], []
     traced = 0
@@ -232,13 +240,17 @@ def _trace_through(accel, normals_geo, origins, directions, max_crossings):
         if len(hit) == 0:
             break
         if len(hit) < len(o):
-            o, d, t, prim, ray = (np.take(a, hit, axis=0) for a in (o, d, t, prim, ray))
+            o, d, t, prim, ray, through = (np.take(a, hit, axis=0)
+                                           for a in (o, d, t, prim, ray, through))
         x = sampling.scale_rows(d, t)
         x += o
         points.append(x)
         rays.append(ray)
         prims.append(prim.astype(np.int32, copy=True))
-        crossed.append(np.full(len(ray), min(depth, 255), np.uint8))
+        crossed.append(np.where(through, THROUGH_GLASS, min(depth, THROUGH_GLASS - 1))
+                       .astype(np.uint8))
+        if transmissive is not None:
+            through = through | transmissive[prim]
         # Restart just past the hit, on the far side of its surface.
         o = accel.offset_origins(x, np.take(normals_geo, prim, axis=0), d)
         depth += 1
@@ -475,18 +487,19 @@ class ShadowPhotonMap:
         k_query = min(neighbours_queried(self.k, self.margin), b - a)
         cap = float(self.radius.get(li, np.inf))
         pos, dirs, shadow = self.positions[a:b], self.directions[a:b], self.crossings[a:b] > 0
+        glass = self.crossings[a:b] == THROUGH_GLASS
         cls = np.empty(count, np.int8)
         radius = np.empty(count, np.float32)
         for s in range(0, count, CLASSIFY_CHUNK):
             e = min(s + CLASSIFY_CHUNK, count)
             cls[s:e], radius[s:e] = self._photon_chunk(tree, pos, dirs, shadow, p32[s:e],
-                                                       n32[s:e], k_query, cap)
+                                                       n32[s:e], k_query, cap, glass)
         out[order] = cls
         rad[order] = radius
         self._tally("photons_", out, time.perf_counter() - t0)
         return (out, rad) if return_radius else out
 
-    def _photon_chunk(self, tree, pos, dirs, shadow, p, n, k_query, cap):
+    def _photon_chunk(self, tree, pos, dirs, shadow, p, n, k_query, cap, glass=None):
         dist, idx = tree.query(p, k=k_query, distance_upper_bound=cap if np.isfinite(cap) else None)
         dist = np.asarray(dist, np.float32).reshape(len(p), k_query)
         idx = np.asarray(idx).reshape(len(p), k_query)
@@ -502,6 +515,11 @@ class ShadowPhotonMap:
         cls = np.full(len(p), PENUMBRA, np.int8)
         cls[enough & (n_shadow == 0)] = LIT
         cls[enough & (n_shadow == n_count)] = UMBRA
+        if glass is not None:
+            # Behind glass: the light's share that reaches the point is not a class (Cycles'
+            # shadow rays stop at glass: traced rays give that answer, and its light comes
+            # through the caustic map).
+            cls[(counts & np.take(glass, flat).reshape(len(p), k_query)).any(axis=1)] = PENUMBRA
         return cls, radius
 
     def _tally(self, prefix, classes, seconds):
@@ -601,6 +619,9 @@ def build_shadow_photon_map(scene, accel, lights, count: int = 0, seed: int = 0,
     # 2. Tracing through every surface, in chunks (deterministic: no random numbers).
     t0 = time.perf_counter()
     normals_geo = scene.geometric_normals()
+    materials = MaterialTable(scene)
+    transmissive = materials.transmissive[scene.material_ids] if materials.has_transmission \
+        else None
     total = len(origins)
     step = int(getattr(accel, "chunk", 1 << 16)) if pool is not None else max(total, 1)
     bounds = [(a, min(a + step, total)) for a in range(0, total, step)]
@@ -608,7 +629,7 @@ def build_shadow_photon_map(scene, accel, lights, count: int = 0, seed: int = 0,
     def trace(bound):
         a, b = bound
         x, ray, crossed, prim, rays, dropped = _trace_through(
-            accel, normals_geo, origins[a:b], directions[a:b], max_crossings)
+            accel, normals_geo, origins[a:b], directions[a:b], max_crossings, transmissive)
         return x, ray + a, crossed, prim, rays, dropped
 
     parts = list(pool.map(trace, bounds)) if pool is not None else [trace(b) for b in bounds]

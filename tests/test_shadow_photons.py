@@ -309,3 +309,32 @@ def test_same_classes_at_any_scale():
         assert emitted == results[1][0]
         assert radius == pytest.approx(results[1][1], rel=1e-5)
         assert np.mean(cls == results[1][2]) > 0.995
+
+
+def test_points_behind_glass_are_traced_never_umbra():
+    """The occluder of the classes test made of glass (a Glass BSDF closure): no floor point
+    in its shadow is UMBRA (they are PENUMBRA: traced, and Cycles' shadow rays stop at glass,
+    so the traced answer is the same, while the light through it comes from the caustic map).
+    The same quad opaque gives UMBRA under its middle (the contrast: the test fails if glass
+    is treated as any occluder)."""
+    from lanterna.engine.shaders import Closure, seed_reduction
+
+    closures = (Closure("glass"),)
+    seed = seed_reduction(closures)
+    glass = Material("glass", diffuse=seed.diffuse, specular=np.clip(seed.specular, 0, 1),
+                     closures=closures)
+    occluder = _occluder()
+    floor_ids = np.zeros(2, np.int32)
+    under = np.column_stack([np.random.default_rng(3).uniform(-0.1, 0.1, (400, 2)),
+                             np.zeros(400)])
+    up = np.tile([0.0, 0.0, 1.0], (len(under), 1))
+    classes = {}
+    for name, mats in (("glass", [Material("white"), glass]), ("opaque", None)):
+        ids = np.r_[floor_ids, np.ones(len(occluder), np.int32)] if mats else None
+        scene = _scene([occluder], materials=mats, material_ids=ids)
+        accel = Accelerator(scene.triangles, threads=1)
+        smap = build_shadow_photon_map(scene, accel, LightSet(scene), 0, seed=1)
+        classes[name] = smap.classify(under, up, 0)
+    assert np.mean(classes["opaque"] == UMBRA) > 0.9
+    assert not np.any(classes["glass"] == UMBRA)
+    assert np.all(classes["glass"] == PENUMBRA)

@@ -203,15 +203,30 @@ def test_trace_through_stacked_planes():
         assert a.shape == (0,) and a.dtype == dtype
 
 
-def test_crossings_saturate_at_255():
-    """A ray down through 260 stacked planes: the crossing count stops at 255 (one byte)."""
+def test_crossings_saturate_at_254():
+    """A ray down through 260 stacked planes: the crossing count stops at 254 (one byte; 255
+    is ``THROUGH_GLASS``)."""
     tris = np.concatenate([quad([0, 0, 0.01 * z], [1, 0, 0], [0, 1, 0]) for z in range(260)])
     scene = _scene(tris)
     accel = Accelerator(scene.triangles, threads=1)
     x, ray, crossed, prim, traced, dropped = S._trace_through(
         accel, scene.geometric_normals(), np.array([[0.1, 0.2, 3.0]]), np.array([[0.0, 0, -1.0]]), 300)
     assert len(x) == 260 and dropped == 0
-    assert crossed.tolist() == list(range(255)) + [255] * 5
+    assert crossed.tolist() == list(range(254)) + [254] * 6
+
+
+def test_hits_after_a_transmissive_surface_are_marked_through_glass():
+    """Five stacked planes, the second (from the top) transmissive: the first two hits keep
+    their counts, every hit below the glass is ``THROUGH_GLASS``."""
+    tris = np.concatenate([quad([0, 0, 0.1 * z], [1, 0, 0], [0, 1, 0]) for z in range(5)])
+    scene = _scene(tris)
+    accel = Accelerator(scene.triangles, threads=1)
+    glass = np.zeros(len(tris), bool)
+    glass[[6, 7]] = True                     # the plane at z = 0.3, hit second from above
+    _x, _ray, crossed, _prim, _traced, _dropped = S._trace_through(
+        accel, scene.geometric_normals(), np.array([[0.1, 0.2, 3.0]]),
+        np.array([[0.0, 0, -1.0]]), 10, glass)
+    assert crossed.tolist() == [0, 1, S.THROUGH_GLASS, S.THROUGH_GLASS, S.THROUGH_GLASS]
 
 
 # -- Classification on hand-made photons --------------------------------------------------------
