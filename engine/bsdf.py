@@ -33,7 +33,18 @@ Parameters (per material, ``Scene.materials``; per hit after ``at``)
     exitance           W/m^2    radiant exitance M per channel
     emitted_radiance   W/m^2/sr L_e = M / pi per emitting side
     both_sides         bool     emits from both faces (Cycles' Emission shader does)
+    transport_diffuse  [0, 1]   what photons see: rho_d, below a Principled specular layer
+                                x (1 - max E_avg), E_avg its cosine-weighted mean albedo
+                                (``layer_average``)
+    transport_specular [0, 1]   the photons' and gather rays' specular share: rho_s + E_avg;
+                                a specular pick samples the glossy lobes (``sample_glossy``)
     =================  =======  ===========================================================
+
+Glossy and glass lobes per material (``glossy_material``): ``GlossyLobe`` (GGX reflection),
+``GlassLobe`` (dielectric), composed as Cycles composes the Principled BSDF and the other
+nodes; ``layer_diffuse_factor`` is the diffuse share below a layer at a view direction and
+``reflection_albedo`` the reflection lobes' summed albedo (what a camera-path probe and a
+gather ray read where they land).
 """
 from __future__ import annotations
 
@@ -48,7 +59,9 @@ from .lobes import MicrofacetGlass, MicrofacetReflection, SmoothGlass, SmoothRef
 
 __all__ = ["MaterialTable", "SurfaceParams", "Lambertian", "PerfectMirror", "SurfaceBSDF",
            "roulette_probabilities", "reflect", "GlossyLobe", "GlassLobe", "GlossyMaterial",
-           "glossy_material", "sample_glossy", "SHARP_ALPHA"]
+           "glossy_material", "sample_glossy", "layer_diffuse_factor", "layer_average",
+           "reflection_albedo",
+           "SHARP_ALPHA"]
 
 # A glossy lobe narrower than this (sqrt(alpha_x alpha_y)) takes the light of emitters it can
 # hit (emissive meshes, the world) from its own sampled rays instead of from light samples:
@@ -88,10 +101,7 @@ class MaterialTable:
         table = scene.material_table()
         self.diffuse = table["diffuse"].astype(np.float64)
         self.specular = table["specular"].astype(np.float64)
-        # Glossy lobes (issue 23): per material a GlossyMaterial or None. Photons and the
-        # gather see a Principled specular layer as part of the diffuse base (moving the
-        # layer's mean albedo into their specular part made the Principled room 6.7 % bright
-        # where it was 3.9 % dark: not understood yet, so not done).
+        # Glossy lobes (issue 23): per material a GlossyMaterial or None.
         self.glossy = [glossy_material(getattr(m, "closures", ())) for m in scene.materials]
         self.camera_glossy = np.array([g is not None for g in self.glossy], bool)
         self.has_glossy = bool(self.camera_glossy.any())
@@ -99,14 +109,29 @@ class MaterialTable:
         self.transmissive = np.array([g is not None and any(lobe.transmits for lobe in g.lobes)
                                       for g in self.glossy], bool)
         self.has_transmission = bool(self.transmissive.any())
+        # What photons and gather rays see (``transport_*``): the camera's diffuse and
+        # specular, but for a Principled specular layer, which takes its cosine-weighted mean
+        # albedo E_avg from the diffuse below it (1 - max E_avg) and becomes a specular share
+        # E_avg that photons and gather rays sample by its GGX lobe (``layer_average``).
+        self.transport_diffuse = self.diffuse.copy()
+        self.transport_specular = self.specular.copy()
+        self.has_layer = any(g is not None and g.layer is not None for g in self.glossy)
+        for material_id, spec in enumerate(self.glossy):
+            if spec is not None and spec.layer is not None:
+                average = layer_average(spec.layer)
+                self.transport_diffuse[material_id] *= 1.0 - average.max()
+                self.transport_specular[material_id] += average
         self.exitance = table["exitance"].astype(np.float64)
         self.emitted_radiance = self.exitance / np.pi
         self.both_sides = table["both_sides"]
         self.diffuse_over_pi = self.diffuse / np.pi
+        self.transport_diffuse_over_pi = self.transport_diffuse / np.pi
+        self.is_transport_specular = np.any(self.transport_specular > 0, axis=1)
         self.is_diffuse = np.any(self.diffuse > 0, axis=1)
         self.is_specular = np.any(self.specular > 0, axis=1)
         self.is_emissive = np.any(self.exitance > 0, axis=1)
         self.has_specular = bool(self.is_specular.any())
+        self.has_transport_specular = bool(self.is_transport_specular.any())
         self.has_emission = bool(self.is_emissive.any())
         self.count = len(self.diffuse)
         # Every parameter is one value per material (no textures yet): stages may then work
@@ -144,13 +169,19 @@ class SurfaceParams:
     is_diffuse = property(lambda self: self._take("is_diffuse"))
     is_specular = property(lambda self: self._take("is_specular"))
     camera_glossy = property(lambda self: self._take("camera_glossy"))
+    transport_diffuse = property(lambda self: self._take("transport_diffuse"))
+    transport_specular = property(lambda self: self._take("transport_specular"))
+    transport_diffuse_over_pi = property(lambda self: self._take("transport_diffuse_over_pi"))
+    is_transport_specular = property(lambda self: self._take("is_transport_specular"))
 
     def subset(self, index) -> "SurfaceParams":
         """The parameters of the hits ``index`` (an index array or mask)."""
         return SurfaceParams(self.table, self.material[index])
 
-    def bsdf(self) -> "SurfaceBSDF":
-        return SurfaceBSDF(self)
+    def bsdf(self, transport: bool = False) -> "SurfaceBSDF":
+        """The seed's BSDF at these hits; ``transport``: as photons and gather rays see it
+        (``MaterialTable.transport_diffuse`` / ``transport_specular``)."""
+        return SurfaceBSDF(self, transport)
 
 
 # -- Lobes ----------------------------------------------------------------------------------------
@@ -208,18 +239,20 @@ class SurfaceBSDF:
     ``sample`` picks a lobe with the roulette's probabilities (normalised: a pick, not an
     absorption) and divides by that probability."""
 
-    def __init__(self, params: SurfaceParams):
+    def __init__(self, params: SurfaceParams, transport: bool = False):
         self.params = params
-        self.diffuse = Lambertian(params.diffuse)
-        self.mirror = PerfectMirror(params.specular)
+        self.rho_d = params.transport_diffuse if transport else params.diffuse
+        self.rho_s = params.transport_specular if transport else params.specular
+        self.diffuse = Lambertian(self.rho_d)
+        self.mirror = PerfectMirror(self.rho_s)
 
     def lobe_probabilities(self):
         """Russian roulette's (P_d, P_s) at each hit (``roulette_probabilities``)."""
-        return roulette_probabilities(self.params.diffuse, self.params.specular)
+        return roulette_probabilities(self.rho_d, self.rho_s)
 
     def absorption(self) -> np.ndarray:
         """The share of light a hit absorbs per channel, 1 - rho_d - rho_s, in [0, 1]."""
-        return np.clip(1.0 - self.params.diffuse - self.params.specular, 0.0, 1.0)
+        return np.clip(1.0 - self.rho_d - self.rho_s, 0.0, 1.0)
 
     def evaluate(self, wo, wi, n):
         return self.diffuse.evaluate(wo, wi, n)
@@ -244,13 +277,13 @@ class SurfaceBSDF:
             m = np.flatnonzero(mirrored)
             share_s = 1.0 - share_d[m]
             wi[m] = reflect(-wo[m], n[m])
-            weight[m] = np.divide(self.params.specular[m], share_s[:, None],
+            weight[m] = np.divide(self.rho_s[m], share_s[:, None],
                                   out=np.zeros((len(m), 3)), where=share_s[:, None] > 0)
             pdf[m] = np.inf
         return wi, weight, pdf, mirrored
 
     def albedo(self):
-        return self.params.diffuse + self.params.specular
+        return self.rho_d + self.rho_s
 
 
 # -- Glossy materials seen by the camera (issue 23) ----------------------------------------------
@@ -334,6 +367,16 @@ class GlossyMaterial:
             return np.ones(len(wo))
         albedo = self.layer.at(len(wo)).albedo(wo, n)
         return np.clip(1.0 - albedo.max(axis=1), 0.0, 1.0)
+
+
+def layer_average(layer: GlossyLobe, points: int = 64) -> np.ndarray:
+    """The cosine-weighted mean of a specular layer's directional albedo (3,), E_avg =
+    2 int_0^1 E(mu) mu dmu, by the midpoint rule over ``points`` view cosines."""
+    mu = (np.arange(points) + 0.5) / points
+    wo = np.stack([np.sqrt(1.0 - mu * mu), np.zeros(points), mu], axis=1)
+    n = np.broadcast_to([0.0, 0.0, 1.0], (points, 3))
+    albedo = layer.at(points).albedo(wo, np.ascontiguousarray(n)) * layer.weight[None, :]
+    return 2.0 * (albedo * mu[:, None]).mean(axis=0)
 
 
 def _principled_lobes(c, lobes):
@@ -429,6 +472,34 @@ def glossy_material(closures) -> GlossyMaterial | None:
     if not lobes:
         return None
     return GlossyMaterial(lobes, layer)
+
+
+def layer_diffuse_factor(table: MaterialTable, material_ids, wo, n) -> np.ndarray:
+    """(N,) the share of the diffuse below each hit's Principled specular layer at view
+    directions ``wo`` (``GlossyMaterial.diffuse_factor``: 1 - max E_layer(mu_o)), 1 where
+    the material has no layer."""
+    out = np.ones(len(material_ids))
+    layered = [m for m in np.unique(material_ids)
+               if table.glossy[m] is not None and table.glossy[m].layer is not None]
+    for material_id in layered:
+        hits = np.flatnonzero(material_ids == material_id)
+        out[hits] = table.glossy[material_id].diffuse_factor(wo[hits], n[hits])
+    return out
+
+
+def reflection_albedo(table: MaterialTable, material_ids, wo, n) -> np.ndarray:
+    """(N, 3) the summed directional albedo of each hit's glossy reflection lobes (glass lobes
+    left out) at view directions ``wo``: 0 where the material has none."""
+    out = np.zeros((len(material_ids), 3))
+    for material_id in np.unique(material_ids):
+        spec = table.glossy[material_id]
+        if spec is None:
+            continue
+        hits = np.flatnonzero(material_ids == material_id)
+        for lobe in spec.lobes:
+            if not lobe.transmits:
+                out[hits] += lobe.weight[None, :] * lobe.at(len(hits)).albedo(wo[hits], n[hits])
+    return out
 
 
 def sample_glossy(table: MaterialTable, material_ids, wo, n, rng, front=None,

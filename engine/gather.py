@@ -13,10 +13,16 @@ What it computes
         theta_j = asin(sqrt((j + xi1) / M)), phi_k = 2 pi (k + xi2) / N (Eq. 8.4-8.6), so that
         E = pi / (M N) * sum_jk L_jk. Where a gather ray lands:
         * on a diffuse surface: rho_d / pi * E of the precomputed estimates (direct and
-          indirect light of that surface, as the photon map holds both);
-        * on a perfect specular surface: the ray is reflected (up to ``max_specular``) with
-          throughput rho_s, and the emission of what it then meets is counted (an emitter
-          seen in a mirror lights the gather point indirectly);
+          indirect light of that surface, as the photon map holds both); below a Principled
+          specular layer x (1 - E_layer(mu)) at the ray's own angle (Cycles' layering);
+        * on a specular surface (``MaterialTable.is_transport_specular``: a mirror, glossy
+          lobes, glass, a Principled layer) the ray also goes on, up to ``max_specular``
+          bounces, by sampling the surface's lobes (``bsdf.sample_glossy``; mirrors reflect),
+          with Russian roulette on the weight w: it goes on with probability
+          min(1, max w / ``ROULETTE_WEIGHT``), its weight divided by that (mirrors of rho_s
+          >= 0.5 and glass always go on, a layer's few per cent rarely); the emission of what it then meets is counted (an emitter seen in a
+          mirror lights the gather point indirectly) unless a caustic map holds that light
+          (``mirrored_emission`` False);
         * on an emitter, or into the world: nothing. The emission of meshes and the world's
           radiance are direct light, which ``engine/direct.py`` computes exactly for every
           shading point; counting them here would count them twice.
@@ -33,7 +39,9 @@ Parameters
                                    used 1/4); at most ``max_estimates``
     max_estimates        400 000   cap on the precomputed estimates (time and memory)
     k                    50        photons per precomputed estimate
-    max_specular         4         mirror bounces a gather ray may take
+    max_specular         4         specular bounces a gather ray may take (the plan: 8 with
+                                   glass)
+    ROULETTE_WEIGHT      0.5       a continuation of smaller weight goes on by roulette
     ===================  ========  ==========================================================
 """
 from __future__ import annotations
@@ -44,7 +52,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import sampling
-from .bsdf import sample_glossy
+from .bsdf import layer_diffuse_factor, sample_glossy
+
+ROULETTE_WEIGHT = 0.5      # continuations of smaller weight go on by Russian roulette
 
 LOOKUP_NEIGHBOURS = 4       # nearest estimates inspected for one with an agreeing normal
 DISC_THICKNESS = 0.25       # a look-up's disc, as the photon estimate's (photons.py)
@@ -265,7 +275,13 @@ def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfa
             # light is the emitters it sees straight): counted here, or it was lost.
             emitted = surface.emitted_radiance * (~facing | surface.both_sides)[:, None]
             radiance[ray_of] += emitted * throughput
+        # The diffuse radiance towards the gather point: rho_d / pi, below a Principled
+        # specular layer x (1 - E_layer) at this ray's own angle (Cycles' layering; the
+        # layer's own reflection is the continuation below).
         rho = surface.diffuse_over_pi
+        if surfaces.materials.has_layer:
+            rho = rho * layer_diffuse_factor(surfaces.materials, surface.material,
+                                             -dirs.astype(np.float64), ng)[:, None]
         diffuse = np.any(rho > 0, axis=1)
         if diffuse.any():
             e = estimates.lookup(x[diffuse], ng[diffuse]).astype(np.float64)
@@ -273,13 +289,14 @@ def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfa
             if throughput is not None:
                 value *= throughput[diffuse]
             radiance[ray_of[diffuse]] += value
-        mirror = surface.is_specular
+        mirror = surface.is_transport_specular
         if bounce == max_specular or not mirror.any():
             break
         idx = np.nonzero(mirror)[0]
         nm = ng[idx]
         incoming = dirs[idx]
-        dirs, weight, _pdf = surface.subset(idx).bsdf().mirror.sample(-incoming, nm)
+        dirs, weight, _pdf = surface.subset(idx).bsdf(transport=True).mirror.sample(-incoming,
+                                                                                     nm)
         if surfaces.materials.has_glossy:
             # Materials with glossy lobes (issue 23): sampled (bsdf.sample_glossy), not
             # mirrored.
@@ -292,6 +309,16 @@ def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfa
                 dirs = dirs.astype(np.float64)
                 weight = weight.astype(np.float64)
                 dirs[glossy], weight[glossy] = g_dirs, g_weight
+        # Russian roulette on the continuation: it goes on with probability q = the largest
+        # channel of its weight / ROULETTE_WEIGHT (at most 1), its weight divided by q. A
+        # mirror of rho_s >= 0.5 or glass always goes on; a Principled specular layer (weight
+        # ~ F, a few %) rarely, so that walls of Principled BSDFs do not multiply the rays.
+        q = np.clip(np.max(weight, axis=1) / ROULETTE_WEIGHT, 0.0, 1.0)
+        go = rng.random(len(q)) < q
+        weight = np.asarray(weight, np.float64)[go] / q[go, None]
+        idx, dirs, nm = idx[go], np.asarray(dirs)[go], nm[go]
+        if len(idx) == 0:
+            break
         origins = accel.offset_origins(x[idx], nm, dirs)
         throughput = weight if throughput is None else throughput[idx] * weight
         ray_of = ray_of[idx]

@@ -123,6 +123,12 @@ class FinalGather:
     def irradiance(self, x, ns, ng, rng, stats):
         return self.gather(x, ns, ng, rng, stats)[0]
 
+    def surface_irradiance(self, x, n):
+        """All the light's irradiance (N, 3) [W/m^2] at surface points ``x`` (normals ``n``
+        towards the viewer) from the irradiance precomputed at photons: what a gather ray
+        reads where it lands."""
+        return self.estimates.lookup(x, n).astype(np.float64)
+
 
 class CachedIndirect:
     """Indirect light from the irradiance cache (seed chapter 10): interpolation with the
@@ -146,6 +152,10 @@ class CachedIndirect:
         self.use_gradients = use_gradients
         self.eye = np.asarray(eye, np.float64)
         self.pixel_angle = float(pixel_angle)
+
+    def surface_irradiance(self, x, n):
+        """As ``FinalGather.surface_irradiance``."""
+        return self.gather.surface_irradiance(x, n)
 
     def irradiance(self, x, ns, ng, rng, stats):
         e, covered, _w, _count = self.cache.interpolate(x, ns, self.a,

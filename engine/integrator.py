@@ -22,12 +22,15 @@ What it computes
           below a Principled specular layer scaled by 1 - its albedo (Cycles' layering);
           then one ray by sampling a lobe: where the glossy lobes reflect more than the diffuse
           part the path goes on from it, elsewhere it ends and the ray is an emission probe
-          while the lobes' indirect light is the irradiance estimate x albedo / pi
-          (``_GlossyHits``). The world reaches glossy lobes only through their own rays;
+          that also reads the diffuse radiance where it lands (the irradiance precomputed at
+          photons, ``surface_irradiance`` of the gather or cache estimator): the lobes'
+          indirect light, one final-gather ray of the lobe (``_GlossyHits``; with indirect =
+          photon, which stores no direct light, the irradiance estimate x albedo / pi as if
+          it came evenly). The world reaches glossy lobes only through their own rays;
           emissive meshes through their rays for sharp lobes (``bsdf.SHARP_ALPHA``), through
-          light samples otherwise, so that each light is counted once. Photons and the final
-          gather still see the seed's reduction of these materials (``shaders``), but for
-          glass, which they refract through as the camera does;
+          light samples otherwise, so that each light is counted once. Photons and gather
+          rays see these materials as ``MaterialTable.transport_*`` says: glossy lobes and
+          glass sampled, a Principled layer as a specular share over a diffuse reduced by it;
         * glass (``bsdf.GlassLobe``: Glass, Refraction, Principled Transmission) is a lobe
           like the glossy ones that always goes on: eta = IOR entering a front face, 1 / IOR
           leaving by a back face, all its light from its own rays;
@@ -58,7 +61,7 @@ import numpy as np
 
 from . import sampling
 from .camera import pixel_rays
-from .bsdf import sample_glossy
+from .bsdf import layer_diffuse_factor, reflection_albedo, sample_glossy
 from .direct import direct_terms, irradiance_from_terms
 from .passes import DIFFUSE, GLOSSY, LIGHT_PASS_NAMES, TRANSMISSION, LightSums
 from .lights import SphereLight, seen_light_radiance
@@ -193,6 +196,11 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
     stats = dict.fromkeys(BATCH_COUNTERS, 0)
     stats["seconds"] = 0.0
     direct_light = settings.mode == "full"
+    # Glossy lobes where the path ends take their indirect light from their probe rays' hits
+    # (``surface_irradiance`` of the estimator: the gather's and the cache's precomputed
+    # irradiance); the photon estimate at the hit has no direct light stored, so it keeps the
+    # uniform approximation.
+    probe_lookup = direct_light and hasattr(photon, "surface_irradiance")
     started = time.perf_counter()
     rng = sampling.rng_for(settings.seed, sampling.STREAM_CAMERA, batch)
     spp = settings.samples
@@ -295,6 +303,26 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
                     light.add_seen(rays, emitted if thr is None else thr * emitted, world=False)
                 else:
                     light.add(rays, thr * emitted, direct=depth == 1)
+        if probing is not None and probing.any() and probe_lookup:
+            # Emission probes from glossy hits where the path ended: the radiance of the
+            # surface they meet is the glossy lobe's indirect light (one final-gather ray of
+            # the lobe, Jensen 1996): the irradiance precomputed at photons there (all light
+            # at that point) x rho_d / pi (below a layer x 1 - E_layer at this ray's angle)
+            # plus, for its own glossy lobes, x their albedo / pi (as if it came evenly: the
+            # second bounce, where that approximation costs least).
+            met = np.flatnonzero(probing & surface.is_diffuse)
+            if len(met):
+                wo_met, n_met = -d[met].astype(np.float64), ng[met].astype(np.float64)
+                rho = surface.diffuse_over_pi[met]
+                if materials.has_layer:
+                    rho = rho * layer_diffuse_factor(materials, surface.material[met], wo_met,
+                                                     n_met)[:, None]
+                rho = rho + reflection_albedo(materials, surface.material[met], wo_met,
+                                              n_met) / np.pi
+                value = photon.surface_irradiance(x[met], ng[met]) * rho * thr[met]
+                add_to_pixels(indirect_sums, rays[met] // spp, value)
+                if light is not None:
+                    light.add(rays[met], value, direct=False)
         if probing is not None and probing.any():
             shaded = np.flatnonzero(~probing)
             if len(shaded) == 0:
@@ -341,9 +369,10 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
                     usage[:, 0] += np.bincount(owner[covered], minlength=len(usage))
                     usage[:, 1] += np.bincount(owner[~covered], minlength=len(usage))
                 e *= (spp / min(photon.lookups, spp))
-                if glossy is not None and direct_light:
+                if glossy is not None and direct_light and not probe_lookup:
                     # Glossy lobes at hits where the path ends: their indirect light from the
-                    # same irradiance, as if it came evenly from the hemisphere.
+                    # same irradiance, as if it came evenly from the hemisphere (where no
+                    # probe look-up is possible: indirect = photon).
                     e_glossy = glossy.ending_albedo[ask] * e / np.pi
                     if light is not None and depth == 0:
                         e_through = glossy.ending_transmitted[ask] * e / np.pi
@@ -352,7 +381,7 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
                     e *= glossy.diffuse_factor[ask][:, None]
                     if light is not None and depth == 0:
                         light.add(rays[ask], e, direct=False, kind=DIFFUSE)
-                    if direct_light:
+                    if direct_light and not probe_lookup:
                         e += e_glossy
                         if light is not None and depth == 0:
                             light.add(rays[ask], e_glossy - e_through, direct=False,
@@ -367,7 +396,7 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
                 add_to_pixels(indirect_sums, rays[ask] // spp, e)
         if idx is not None and direct_light and context.caustics is not None:
             _shade_caustics(context, stats, idx, x, ns, surface, glossy, thr, rays, spp,
-                            depth, indirect_sums, light)
+                            depth, indirect_sums, light, probe_lookup)
         if idx is not None and direct_light:
             _shade_direct(context, stats, rng, depth, idx, x, ns, ng, surface, thr, rays,
                           pixel_of, direct_sums,
@@ -518,11 +547,13 @@ def edge_emission(context: CameraContext, camera, batch: int, pixels: np.ndarray
 
 
 def _shade_caustics(context, stats, idx, x, ns, surface, glossy, thr, rays, spp, depth,
-                    indirect_sums, light=None):
+                    indirect_sums, light=None, probe_lookup=False):
     """Caustics at the diffuse hits ``idx``: the caustic map's irradiance (light that reached
     them through specular surfaces, ``indirect.CausticEstimate``) x rho_d / pi (below a
-    Principled layer: x its diffuse share), plus, at glossy hits where the path ends, x their
-    glossy albedo / pi; summed into the Indirect part (and ``light``'s Indirect passes)."""
+    Principled layer: x its diffuse share), plus, at glossy hits where the path ends and no
+    probe look-up takes their indirect light (``probe_lookup`` False), x their glossy albedo
+    / pi (with the look-up, the radiance the probe reads already holds what reaches them
+    through specular surfaces); summed into the Indirect part (and ``light``'s passes)."""
     ask = idx if isinstance(idx, np.ndarray) else np.arange(len(x))
     t0 = time.perf_counter()
     e = context.caustics.irradiance(x[ask], ns[ask], stats)
@@ -536,11 +567,13 @@ def _shade_caustics(context, stats, idx, x, ns, surface, glossy, thr, rays, spp,
         value *= glossy.diffuse_factor[at][:, None]
         if light is not None and depth == 0:
             light.add(rays[at], value, direct=False, kind=DIFFUSE)
-            through = glossy.ending_transmitted[at] * e / np.pi
-            light.add(rays[at], glossy.ending_albedo[at] * e / np.pi - through, direct=False,
-                      kind=GLOSSY)
-            light.add(rays[at], through, direct=False, kind=TRANSMISSION)
-        value += glossy.ending_albedo[at] * e / np.pi
+            if not probe_lookup:
+                through = glossy.ending_transmitted[at] * e / np.pi
+                light.add(rays[at], glossy.ending_albedo[at] * e / np.pi - through,
+                          direct=False, kind=GLOSSY)
+                light.add(rays[at], through, direct=False, kind=TRANSMISSION)
+        if not probe_lookup:
+            value += glossy.ending_albedo[at] * e / np.pi
     elif light is not None and depth == 0:
         light.add(rays[at], value, direct=False, kind=DIFFUSE)
     if depth > 0:
@@ -605,10 +638,12 @@ class _GlossyHits:
     Where the glossy lobes reflect more than the diffuse part (largest channel of the summed
     albedos: metals, a Mix floor of more glossy than diffuse) the path goes on by sampling
     them (``goes_on``); elsewhere it ends here (diffuse-dominant, as photon mapping
-    splits transport: Jensen 1996), and the glossy lobes' indirect light is the irradiance
-    estimate times their albedo / pi (``ending_albedo``), as if it came evenly; their ray
-    still goes one step as an emission probe, for the world and the emitters it meets (their
-    direct light), and is not shaded where it lands.
+    splits transport: Jensen 1996): their ray still goes one step as an emission probe, for
+    the world and the emitters it meets (their direct light) and the diffuse radiance of the
+    surface it lands on (their indirect light, from the irradiance precomputed at photons);
+    it is not shaded there. Without precomputed irradiance (indirect = photon) the lobes'
+    indirect light is the irradiance estimate times their albedo / pi (``ending_albedo``),
+    as if it came evenly.
 
     ``index`` (G,) the glossy hits among the vertex's N hits, ``mask`` (N,), ``goes_on`` (N,)
     the hits where the path goes on, ``group_of`` / ``row_of`` (N,) each hit's material group

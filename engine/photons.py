@@ -502,7 +502,7 @@ def trace_photons(scene: Scene, accel, emitted: EmittedPhotons, rng: np.random.G
             # Caustic paths: the first hit must be specular; diffuse stores need a specular
             # bounce before them.
             if not depth.any():
-                first = np.flatnonzero(surface.is_specular)
+                first = np.flatnonzero(surface.is_transport_specular)
                 if len(first) < len(o):
                     o, d, t, prim, x, n, flip = (np.take(a, first, axis=0)
                                                  for a in (o, d, t, prim, x, n, flip))
@@ -510,7 +510,7 @@ def trace_photons(scene: Scene, accel, emitted: EmittedPhotons, rng: np.random.G
                     surface = surface.subset(first)
                 if len(o) == 0:
                     break
-        bsdf = surface.bsdf()
+        bsdf = surface.bsdf(transport=True)
         diffuse = surface.is_diffuse                    # photons are stored at diffuse hits
         if caustic:
             diffuse = diffuse & (depth > 0)
@@ -547,7 +547,7 @@ def trace_photons(scene: Scene, accel, emitted: EmittedPhotons, rng: np.random.G
         x, n, d = (np.take(a, live, axis=0) for a in (x, n, d))
         flip_live = flip[live]                     # hit on the back face (glass: inside)
         power, depth, go_diffuse = np.take(power, live, axis=0), depth[live], go_diffuse[live]
-        p_d, p_s, lobes = p_d[live], p_s[live], surface.subset(live).bsdf()
+        p_d, p_s, lobes = p_d[live], p_s[live], surface.subset(live).bsdf(transport=True)
         # The next segment starts at the hit pulled back along the incoming ray, then pushed
         # off the surface: at a corner the rounded hit can lie outside the neighbouring face
         # (measured: a ceiling corner hit at z = 3.0000002 on the wall, a new direction
@@ -789,11 +789,12 @@ MAX_CAUSTIC_EMITTED = 16_000_000
 def specular_share(scene: Scene, accel, seed: int = 0, count: int = CAUSTIC_PILOT,
                    surfaces: SceneSurfaces | None = None) -> float:
     """The share of the lights' photons whose first hit is a specular surface (mirror, glossy
-    or glass: ``MaterialTable.is_specular``): the projected size of the specular objects as
+    or glass, or a Principled specular layer: ``MaterialTable.is_transport_specular``): the
+    projected size of the specular objects as
     the lights see them, measured by a pilot of ``count`` photons (flux-weighted as
     ``emit_photons`` shares them). 0 when no light sees one."""
     surfaces = surfaces or SceneSurfaces(scene)
-    if not surfaces.materials.has_specular:
+    if not surfaces.materials.has_transport_specular:
         return 0.0
     emitted = emit_photons(scene, count, sampling.rng_for(seed, sampling.STREAM_CAUSTIC, 0))
     if len(emitted.origins) == 0:
@@ -802,7 +803,7 @@ def specular_share(scene: Scene, accel, seed: int = 0, count: int = CAUSTIC_PILO
                                        np.ascontiguousarray(emitted.directions, np.float32))
     hit = prim >= 0
     specular = np.zeros(len(prim), bool)
-    specular[hit] = surfaces.params(prim[hit]).is_specular
+    specular[hit] = surfaces.params(prim[hit]).is_transport_specular
     weight = emitted.power @ LUMINANCE
     total = float(weight.sum())
     return float(weight[specular].sum() / total) if total > 0 else 0.0

@@ -200,7 +200,7 @@ def make_plan(scene, settings, lights, materials) -> Plan:
     elif not plan["final_gather"]:
         plan.set("caustics", False, "indirect = photon: the photon map at the hit holds the "
                                     "caustics")
-    elif not materials.has_specular:
+    elif not getattr(materials, "has_transport_specular", materials.has_specular):
         plan.set("caustics", False, "no specular or glass surface")
     else:
         plan.set("caustics", True, "specular or glass surfaces (checked by a pilot of photons)")

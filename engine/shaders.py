@@ -21,14 +21,16 @@ that nothing is approximated without a word:
 closure        seed material (weight w multiplies each line)
 =============  ================================================================================
 principled     rho_d = Base Color (1 - Metallic)(1 - Transmission); rho_s = Base Color x
-               Metallic as a mirror + sqrt(Base Color)(1 - Metallic) Transmission (roughness,
-               the dielectric specular layer, coat, sheen, thin film, alpha: reported when
-               they matter). Camera paths render the metal and the specular layer as GGX
-               lobes, everything renders the transmission as glass (``bsdf.glossy_material``)
+               Metallic + sqrt(Base Color)(1 - Metallic) Transmission, the roulette's shares
+               (coat, sheen, thin film, alpha: reported when they matter). The metal, the
+               dielectric specular layer (``bsdf.MaterialTable.transport_*`` for photons and
+               gather rays) and the transmission are rendered everywhere by their GGX and
+               glass lobes (``bsdf.glossy_material``)
 diffuse        rho_d = Color (Roughness > 0, Oren-Nayar, is reported and rendered Lambertian)
-glossy         rho_s = Color, a mirror (Roughness > 0.1 reported); camera paths: GGX
-metallic       rho_s = Base Color (F82) or ((n-1)^2 + k^2) / ((n+1)^2 + k^2) (physical), a
-               mirror; camera paths: GGX with the F82-tint or conductor Fresnel
+glossy         rho_s = Color, the roulette's share; rendered everywhere as GGX
+metallic       rho_s = Base Color (F82) or ((n-1)^2 + k^2) / ((n+1)^2 + k^2) (physical), the
+               roulette's share; rendered everywhere as GGX with the F82-tint or conductor
+               Fresnel
 glass,         rho_s = Color: rendered everywhere (camera, photons, gather) by its glass lobe
 refraction     (``bsdf.GlassLobe``: smooth or GGX dielectric); rho_s is its roulette share
 transparent,   black (reported)
@@ -83,9 +85,6 @@ CLOSURE_KINDS: dict[str, dict] = {
     "emission": {"radiance": _WHITE},
     "holdout": {},
 }
-
-# Principled inputs at or below these values change nothing that today's renderer could show.
-_MIRROR_ROUGHNESS = 0.1
 
 
 @dataclass
@@ -150,12 +149,6 @@ def _principled(c: Closure, note):
     # The transmission is a glass lobe (``bsdf.GlassLobe``); here its share of the roulette.
     specular = base * metallic + (1 - metallic) * transmission * np.sqrt(np.clip(base, 0, None))
     exitance = math.pi * p["emission"]
-    if metallic > 0 and p["roughness"] > _MIRROR_ROUGHNESS:
-        note(f"metallic part of {name} (Roughness {_fmt(p['roughness'])}): camera paths "
-             "render its GGX lobe; photons and the final gather treat it as a perfect mirror")
-    if metallic < 1 and transmission < 1 and p["specular_ior_level"] > 0 and p["ior"] != 1:
-        note(f"specular layer of {name}: camera paths render it; photons and the final "
-             "gather leave it out (they see the diffuse base alone)")
     if transmission > 0 and p["thin_wall"] > 0:
         note(f"Thin Wall of {name} is ignored: its transmission is rendered as a solid "
              "glass object's surface")
@@ -197,10 +190,6 @@ def seed_reduction(closures) -> SeedMaterial:
                 s = ((n - 1) ** 2 + k ** 2) / np.maximum((n + 1) ** 2 + k ** 2, 1e-12)
             else:
                 s = p["base_color"] if c.kind == "metallic" else p["color"]
-            if p["roughness"] > _MIRROR_ROUGHNESS:
-                label = "Metallic BSDF" if c.kind == "metallic" else "Glossy BSDF"
-                note(f"{label} {name} (Roughness {_fmt(p['roughness'])}): camera paths render "
-                     "its GGX lobe; photons and the final gather treat it as a perfect mirror")
         elif c.kind in ("glass", "refraction"):
             # Rendered by its glass lobe (``bsdf.GlassLobe``) everywhere; rho_s is its share
             # in the photons' roulette and marks it as a surface rays go on from.
