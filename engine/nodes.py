@@ -53,7 +53,7 @@ __all__ = ["Node", "Graph", "Image", "UnsupportedNode", "MissingInput", "evaluat
            "mix_color", "rgb_to_hsv", "hsv_to_rgb", "rgb_to_hsl", "hsl_to_rgb",
            "srgb_to_linear", "ramp_table", "image_lookup"]
 
-LUMA = np.array([0.2126729, 0.7151522, 0.0721750])    # Blender's Linear Rec.709 luminance
+LUMA = np.array([0.21263901, 0.71516867, 0.07219232])  # Blender 5.2 config luminance (measured)
 FLT_EPSILON = 1.1920929e-07
 VECTOR_KINDS = ("VECTOR", "RGBA")
 
