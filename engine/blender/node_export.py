@@ -1,0 +1,139 @@
+"""A Blender material's node tree as ``engine.nodes.Graph``: nodes, links, defaults, images.
+
+What it computes
+----------------
+:func:`export_graph` reads every node of a ``bpy.types.NodeTree`` into a plain
+``nodes.Node`` (bl_idname, name, the properties the evaluator uses, each input socket's type and
+``default_value``, each output's type) and every enabled link into ``Graph.links``, keyed by
+socket *identifiers* (Math's three inputs are "Value", "Value_001", "Value_002"). A Value or RGB
+node's constant is read from its output socket; a Color Ramp's stops from ``color_ramp``.
+Muted nodes and links are not followed through (the evaluator sees them as absent).
+
+Images (:func:`image_pixels`): ``Image.pixels.foreach_get`` into a preallocated float32
+(H, W, 4) array, row 0 at the bottom. What Blender 5.2 hands back, measured: for an 8-bit image
+the bytes / 255 as stored, *not* converted to linear whatever its colour space (an sRGB byte of
+128 reads 0.50196); for a float image the float buffer, which Blender holds in scene linear. So
+an 8-bit image tagged "sRGB" is exported with encoding "srgb" (the evaluator interpolates the
+encoded values and converts afterwards, as Cycles does with its byte textures); "Non-Color"
+and the linear spaces as "linear"; any other colour space on a byte image is reported through
+``warn`` and read as sRGB. Packed and file images read the same way (``pixels`` loads them);
+tiled (UDIM) images and sequences are reported and left out (the Image Texture node then gives
+Cycles' missing-image magenta).
+
+Parameters: ``warn`` (callable taking one message; default: ignore), ``images`` (a dict cache
+name -> ``nodes.Image``, shared between materials so each image is read once).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .. import nodes as N
+
+__all__ = ["export_graph", "image_pixels", "output_socket"]
+
+# bl_idname -> properties read as they are (enums as their identifier strings, bools, numbers)
+_PROPS = {
+    "ShaderNodeMath": ("operation", "use_clamp"),
+    "ShaderNodeVectorMath": ("operation",),
+    "ShaderNodeMapRange": ("data_type", "interpolation_type", "clamp"),
+    "ShaderNodeClamp": ("clamp_type",),
+    "ShaderNodeMix": ("data_type", "factor_mode", "blend_type", "clamp_factor", "clamp_result"),
+    "ShaderNodeMixRGB": ("blend_type", "use_clamp"),
+    "ShaderNodeSeparateColor": ("mode",),
+    "ShaderNodeCombineColor": ("mode",),
+    "ShaderNodeTexGradient": ("gradient_type",),
+    "ShaderNodeUVMap": ("uv_map",),
+    "ShaderNodeVertexColor": ("layer_name",),
+    "ShaderNodeMapping": ("vector_type",),
+    "ShaderNodeTexImage": ("interpolation", "projection", "extension"),
+}
+_COLOUR_SPACES_LINEAR = ("Non-Color", "Linear Rec.709", "Linear CIE-XYZ E", "Linear Rec.2020",
+                         "Linear CIE-XYZ D65", "Linear FilmLight E-Gamut", "ACEScg",
+                         "ACES2065-1")
+
+
+def _value(v):
+    if hasattr(v, "__len__") and not isinstance(v, str):
+        return [float(x) for x in v]
+    if isinstance(v, bool):
+        return v
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        return None
+
+
+def image_pixels(image, warn=lambda m: None):
+    """``nodes.Image`` for a bpy image, or None (reported) when it cannot be read."""
+    if image.source in ("TILED", "SEQUENCE", "MOVIE"):
+        warn(f"image '{image.name}': {image.source.lower()} images are not supported yet")
+        return None
+    w, h = image.size
+    if w == 0 or h == 0:
+        warn(f"image '{image.name}' has no pixels (missing file?)")
+        return None
+    px = np.empty(w * h * image.channels, np.float32)
+    image.pixels.foreach_get(px)
+    px = px.reshape(h, w, image.channels)
+    if image.channels != 4:
+        full = np.ones((h, w, 4), np.float32)
+        full[..., :min(3, image.channels)] = px[..., :3]
+        if image.channels == 1:
+            full[..., 1] = full[..., 2] = px[..., 0]
+        px = full
+    space = image.colorspace_settings.name
+    if image.is_float:
+        encoding = "linear"
+    elif space == "sRGB":
+        encoding = "srgb"
+    elif space in _COLOUR_SPACES_LINEAR:
+        encoding = "linear"
+    else:
+        warn(f"image '{image.name}': colour space '{space}' read as sRGB")
+        encoding = "srgb"
+    return N.Image(px, encoding)
+
+
+def export_graph(tree, warn=lambda m: None, images: dict | None = None) -> N.Graph:
+    """The graph of a bpy node tree (see the module docstring)."""
+    images = {} if images is None else images
+    graph = N.Graph()
+    for node in tree.nodes:
+        if node.bl_idname in ("NodeFrame",):
+            continue
+        props = {k: (v if isinstance(v, str) else _value(v))
+                 for k in _PROPS.get(node.bl_idname, ()) if (v := getattr(node, k, None))
+                 is not None}
+        if node.bl_idname in ("ShaderNodeValue", "ShaderNodeRGB"):
+            props["value" if node.bl_idname == "ShaderNodeValue" else "color"] = _value(
+                node.outputs[0].default_value)
+        if node.bl_idname == "ShaderNodeValToRGB":
+            ramp = node.color_ramp
+            props.update(elements=[[float(e.position), [float(c) for c in e.color]]
+                                   for e in ramp.elements],
+                         interpolation=ramp.interpolation, color_mode=ramp.color_mode,
+                         hue_interpolation=ramp.hue_interpolation)
+        if node.bl_idname == "ShaderNodeTexImage" and node.image is not None:
+            name = node.image.name
+            if name not in images:
+                images[name] = image_pixels(node.image, warn)
+            if images[name] is not None:
+                props["image"] = name
+                graph.images[name] = images[name]
+        inputs = {}
+        for s in node.inputs:
+            dv = getattr(s, "default_value", None)
+            inputs[s.identifier] = (s.type, _value(dv) if dv is not None else None)
+        outputs = {s.identifier: s.type for s in node.outputs}
+        graph.nodes[node.name] = N.Node(node.bl_idname, node.name, props, inputs, outputs)
+    for link in tree.links:
+        if link.is_muted or not link.is_valid or link.from_node.mute:
+            continue
+        graph.links[(link.to_node.name, link.to_socket.identifier)] = (
+            link.from_node.name, link.from_socket.identifier)
+    return graph
+
+
+def output_socket(graph: N.Graph, to_node: str, to_input: str):
+    """(node, output identifier) linked into input ``to_input`` of ``to_node``, or None."""
+    return graph.links.get((to_node, to_input))
