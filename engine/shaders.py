@@ -158,6 +158,14 @@ def _principled(c: Closure, note):
         note(f"Sheen Weight of {name} is ignored")
     if p["alpha"] < 1:
         note(f"Alpha < 1 of {name} is ignored (rendered opaque)")
+    if p["subsurface_weight"] > 0 and metallic < 1 and transmission < 1:
+        note(f"Subsurface Weight {_fmt(p['subsurface_weight'])} of {name} is approximated: "
+             "rendered as a diffuse lobe of the Base Color (no subsurface scattering)")
+    if p["diffuse_roughness"] > 0 and metallic < 1 and transmission < 1:
+        note(f"Diffuse Roughness {_fmt(p['diffuse_roughness'])} of {name} (Oren-Nayar) is "
+             "rendered as Lambertian")
+    if p["thin_film_thickness"] > 0:
+        note(f"Thin Film of {name} is ignored (the Fresnel has no interference)")
     return diffuse, specular, exitance
 
 
@@ -201,6 +209,9 @@ def seed_reduction(closures) -> SeedMaterial:
             d = p["color"]
             label = "Translucent BSDF" if c.kind == "translucent" else "Sheen BSDF"
             note(f"{label} {name} is not supported; treated as a diffuse of colour {_fmt(d)}")
+        if c.kind in ("metallic", "glass") and p["thin_film_thickness"] > 0:
+            label = "Metallic BSDF" if c.kind == "metallic" else "Glass BSDF"
+            note(f"Thin Film of {label} {name} is ignored (the Fresnel has no interference)")
         diffuse = diffuse + w * d
         specular = specular + w * s
         exitance = exitance + w * e
