@@ -16,7 +16,7 @@ What it computes (``lanterna bench --materials``)
     3. Cycles on the same bpy scene with the references' settings
        (``configure_cycles(gi=True)`` of ``tests/data/make_cycles_refs.py``: 64 bounces,
        caustics on, no clamping, no adaptive sampling, light threshold 0, Blackman-Harris
-       1.5 px, path guiding off) at each of ``--cycles-samples`` (16, 64, 256, 1024), seed
+       1.5 px, path guiding off) at each of ``--cycles-samples`` (16, 64, 256, 1024, 4096), seed
        ``CYCLES_SEED`` (not a reference seed), via ``bench_cycles.cycles_curve``: one render
        per sample count with OIDN on gives the noisy image and the denoised one; the noisy
        image's time is the render's less OIDN's own time (``measure_denoise_seconds``).
@@ -85,7 +85,7 @@ from .vs_cycles import REPO, BenchError, Parser, int_list, log
 
 PROG = "lanterna bench --materials"
 SCENES = ("factory_cube", "principled_room", "metal_sphere", "mix_floor", "glass_caustic")
-CYCLES_SAMPLES = (16, 64, 256, 1024)
+CYCLES_SAMPLES = (16, 64, 256, 1024, 4096)
 REFERENCES = REPO / "tests" / "data" / "cycles_materials"
 GOAL_SCENE = "principled_room"
 GOAL_RATIO = 0.5                    # issue 23: final's time <= 0.5 x Cycles' at its error

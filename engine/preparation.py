@@ -37,7 +37,7 @@ from .artifacts import Artifacts, scene_fingerprint
 from .gather import RadianceEstimates
 from .indirect import CachedIndirect, CausticEstimate, FinalGather, PhotonEstimate, place_cache
 from .lights import LightSet
-from .photons import (CAUSTIC_PILOT, auto_caustic_stored, auto_max_radius, auto_photon_count,
+from .photons import (CAUSTIC_PILOT, MIN_CAUSTIC_FLUX, auto_caustic_stored, auto_max_radius, auto_photon_count,
                       build_caustic_map, build_photon_map, caustic_emission_count,
                       specular_share)
 from .plan import Plan, make_plan
@@ -147,10 +147,15 @@ def _caustics(prep: Prepared, scene, settings, tell, cancelled):
     estimate's radius follows the map's own density (``build_caustic_map``)."""
     report, plan = prep.report, prep.plan
     t0 = time.perf_counter()
-    share = specular_share(scene, prep.accel, settings.seed, surfaces=prep.surfaces)
+    share, flux_share = specular_share(scene, prep.accel, settings.seed, surfaces=prep.surfaces)
     if not share > 0:
         plan.set("caustics", False, f"no light's photons meet a specular or glass surface "
                                     f"first (a pilot of {CAUSTIC_PILOT:,})")
+        return
+    if flux_share < MIN_CAUSTIC_FLUX:
+        plan.set("caustics", False, f"specular and glass surfaces pass on {flux_share:.2%} of "
+                                    f"the lights' flux (under {MIN_CAUSTIC_FLUX:.1%}; a pilot "
+                                    f"of {CAUSTIC_PILOT:,}): gather rays take it")
         return
     full_w, full_h = scene.camera.resolution
     count = caustic_emission_count(auto_caustic_stored(full_w * full_h), share)
@@ -161,6 +166,7 @@ def _caustics(prep: Prepared, scene, settings, tell, cancelled):
                              cancelled=cancelled)
     stats = cmap.stats
     report.stage("caustics", time.perf_counter() - t0, specular_share=round(share, 6),
+                 flux_share=round(flux_share, 6),
                  emitted=stats["emitted"], stored=stats["stored"], radius=stats["radius"],
                  bytes=stats["bytes"], cancelled=stats["cancelled"])
     if not stats["radius"] > 0:
