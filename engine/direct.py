@@ -42,7 +42,7 @@ import time
 import numpy as np
 
 from . import sampling
-from .lights import LightSet
+from .lights import LightSet, ray_visible
 
 LIT, UMBRA, PENUMBRA = 0, 1, 2          # shadow-photon classes (engine/shadow_photons.py)
 
@@ -206,11 +206,15 @@ def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.
 
 
 def _hittable(light) -> str:
-    """What of the light rays can hit: "mesh" (an emissive mesh, in the BVH), "world", or
-    "" (area lights, suns and delta lights are not geometry)."""
+    """What of the light rays can hit: "mesh" (an emissive mesh, in the BVH), "world", "area"
+    (not geometry, but rays after a delta bounce meet it: area lights and point / spot lights
+    with a radius, ``lights.ray_visible``), or "" (suns, collimated and point lights: only
+    light samples reach them)."""
     if getattr(light, "in_bvh", False):
         return "mesh"
-    return "world" if getattr(light, "kind", "") == "world" else ""
+    if getattr(light, "kind", "") == "world":
+        return "world"
+    return "area" if ray_visible(light) else ""
 
 
 def _count_classes(stats, tally, traced):

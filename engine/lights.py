@@ -156,6 +156,30 @@ class TriangleEmitter:
         self.centroid = (self.tris.mean(axis=1) * self.areas[:, None]).sum(0) / self.total_area
         self.power = np.pi * self.rgb * self.total_area * (2 if two_sided else 1)
 
+    def intersect(self, origins, directions, t_max):
+        """Nearest hit t (N,) of rays with the triangles on their emitting side (inf: none
+        before ``t_max``) and the radiance factor there (1; 0 for no hit): Moller-Trumbore
+        over the (few) triangles of an area light that is not geometry."""
+        best = np.broadcast_to(np.asarray(t_max, np.float64), (len(origins),)).copy()
+        factor = np.zeros(len(origins))
+        for tri, normal in zip(self.tris, self.normals):
+            e1, e2 = tri[1] - tri[0], tri[2] - tri[0]
+            p = np.cross(directions, e2)
+            det = p @ e1
+            ok = np.abs(det) > 1e-300
+            inv = 1.0 / np.where(ok, det, 1.0)
+            s = origins - tri[0]
+            u = _dot(s, p) * inv
+            q = np.cross(s, e1)
+            v = _dot(directions, q) * inv
+            t = (q @ e2) * inv
+            hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0) & (t < best)
+            if not self.two_sided:
+                hit &= directions @ normal < 0
+            best = np.where(hit, t, best)
+            factor = np.where(hit, 1.0, factor)
+        return np.where(factor > 0, best, np.inf), factor
+
     def _facing(self, x, tri_index, direction_to_light):
         """1 where the emitter's lit side faces x along ``direction_to_light``."""
         if self.two_sided:
@@ -281,6 +305,18 @@ class EllipseEmitter:
         self.near_distance = 3.0 * max(np.linalg.norm(self.du), np.linalg.norm(self.dv))
 
     FAN_SEGMENTS = 64
+
+    def intersect(self, origins, directions, t_max):
+        """Nearest hit t (N,) of rays with the ellipse on its emitting side (inf: none before
+        ``t_max``) and the radiance factor there (1; 0 for no hit)."""
+        cos = directions @ self.normal
+        t = _dot(self.center - origins, np.broadcast_to(self.normal, origins.shape)) / \
+            np.where(cos < 0, cos, -1.0)
+        q = origins + t[:, None] * directions - self.center
+        a = q @ self.du / max(float(self.du @ self.du), 1e-300)
+        b = q @ self.dv / max(float(self.dv @ self.dv), 1e-300)
+        hit = (cos < 0) & (t > 0) & (t < t_max) & (a * a + b * b <= 1.0)
+        return np.where(hit, t, np.inf), hit.astype(np.float64)
 
     def sample(self, x, n, u):
         near = np.linalg.norm(x - self.center, axis=1) < self.near_distance
@@ -630,20 +666,29 @@ class LightSet:
         }
 
 
+def ray_visible(light) -> bool:
+    """Whether rays can meet ``light`` though it is not geometry: point and spot lights with a
+    radius (``SphereLight``) and area lights (rectangles as ``TriangleEmitter`` outside the
+    BVH, disks and ellipses); collimated area lights, suns and the world are not."""
+    return isinstance(light, (SphereLight, EllipseEmitter)) or \
+        (isinstance(light, TriangleEmitter) and not light.in_bvh)
+
+
 def seen_light_radiance(lights_or_scene, origins, directions, t_hit) -> np.ndarray:
-    """Radiance (N, 3) [W m^-2 sr^-1] of the point / spot lights with a radius that rays
+    """Radiance (N, 3) [W m^-2 sr^-1] of the lights that are not geometry but that rays
     (``origins`` (N, 3), unit ``directions`` (N, 3)) meet before ``t_hit`` (N,) (np.inf where
-    the ray left the scene); the nearest light wins, a spot's mask on the ray's direction
-    (Cycles ``spot_light_sample_from_intersection``); 0 elsewhere. ``lights_or_scene``: a
-    ``LightSet`` or a ``Scene``. For camera paths after a delta (mirror, smooth glass) bounce,
-    where no light sample could reach the light."""
+    the ray left the scene; ``ray_visible``: point / spot lights with a radius, a spot's mask
+    on the ray's direction (Cycles ``spot_light_sample_from_intersection``), and area lights
+    on their emitting side); the nearest light wins; 0 elsewhere. ``lights_or_scene``: a
+    ``LightSet`` or a ``Scene``. For camera paths after a delta (mirror, smooth glass)
+    bounce, where no light sample could reach the light."""
     lights = lights_or_scene if isinstance(lights_or_scene, LightSet) else LightSet(lights_or_scene)
     o = np.asarray(origins, np.float64).reshape(-1, 3)
     w = np.asarray(directions, np.float64).reshape(-1, 3)
     best = np.broadcast_to(np.asarray(t_hit, np.float64), (len(o),)).copy()
     out = np.zeros((len(o), 3))
     for light in lights.sampled:
-        if not isinstance(light, SphereLight):
+        if not ray_visible(light):
             continue
         t, factor = light.intersect(o, w, best)
         nearer = t < best

@@ -280,3 +280,35 @@ def test_sphere_lights_match_cycles(name):
     assert worst <= REL_TOL and dark <= ABS_TOL, \
         f"{name}: worst bright block {worst:.4f} (limit {REL_TOL}), dark {dark:.4f} of the " \
         f"peak (limit {ABS_TOL}); Cycles' SE <= {se:.4f}"
+
+
+@pytest.mark.parametrize("shape", ["SQUARE", "DISK"])
+def test_area_lights_are_seen_in_a_mirror(shape):
+    """A 2 m area light (power 100 W: L = P / (pi A)) 3 m above a perfect mirror floor
+    (rho_s = 1), the camera 1 m above the floor looking straight down through a 2 degree field:
+    every pixel sees the light's emitting side in the mirror, radiance L exactly (Cycles shows
+    area lights in mirrors); the light's back (turned over) is not seen. Before area lights
+    could be met by rays the pixels were 0."""
+    from lanterna.engine import pipeline
+    from lanterna.engine.scene import AreaLight, Camera, World
+    from lanterna.engine.settings import RenderSettings
+
+    def render(facing_down):
+        m = np.eye(4)
+        m[:3, 3] = [0, 0, 3.0]
+        if not facing_down:
+            m[:3, 2] *= -1
+            m[:3, 1] *= -1
+        light = AreaLight("Panel", shape, m, 2.0, 2.0, [100.0] * 3)
+        floor = quad([0, 0, 0], [40.0, 0, 0], [0, 40.0, 0])
+        scene = Scene(triangles=floor, material_ids=np.zeros(2, np.int32),
+                      materials=[Material("mirror", diffuse=0.0, specular=1.0)],
+                      lights=[light], world=World(),
+                      camera=Camera.look_at([0, 0, 1.0], [0, 0, 0], up=(0, 1, 0),
+                                            fov_x_deg=2.0, resolution=(8, 8)))
+        return pipeline.render(scene, RenderSettings(samples=4, threads=1, seed=1)), light
+
+    result, light = render(True)
+    np.testing.assert_allclose(result.image.reshape(-1, 3), light.radiance[None] *
+                               np.ones((64, 1)), rtol=1e-6)
+    assert np.all(render(False)[0].image == 0)
