@@ -5,8 +5,10 @@ What it computes (seed sections 9.1-9.5, corrections in DESIGN.md §4)
         in proportion to their flux; each carries its light's RGB flux / its photon count:
         point (uniform sphere, 9.1.1), spot (uniform in its cone, weighted by Blender's mask;
         with a radius both leave from the sphere's surface, ``lights.sphere_emission_origins``:
-        the rays of a Lambertian sphere, flux Phi; Soft Falloff's near-field dimming,
-        d^2 / (d^2 + R^2), is not in the photons),
+        the rays of a Lambertian sphere, flux Phi; with Soft Falloff (Blender's default) the
+        power is scaled at the first hit by d^2 / (d^2 + R^2), d the distance from the
+        light's centre, so that photons deliver Cycles' facing-disk irradiance there, the
+        share it never delivers booked as absorbed),
         sun (a disk covering the scene's bounds), area lights (area-uniform points, cosine
         directions, Eq. 9.5; collimated ones along the normal, 9.1.2), emissive meshes
         (triangle by area with ``searchsorted`` on cumulative areas, the seed's "area line",
@@ -100,6 +102,17 @@ class EmittedPhotons:
     directions: np.ndarray     # (N, 3) float64 unit
     power: np.ndarray          # (N, 3) float64 [W]
     per_light: dict = field(default_factory=dict)   # name -> photon count
+    # Soft Falloff lights: per photon the light's centre (N, 3) and R^2 (N,) (0: no dimming);
+    # None when no photon comes from one.
+    falloff_center: np.ndarray | None = None
+    falloff_r2: np.ndarray | None = None
+
+    def subset(self, a: int, b: int) -> "EmittedPhotons":
+        """Photons a..b (a chunk)."""
+        cut = (lambda v: None if v is None else v[a:b])
+        return EmittedPhotons(self.origins[a:b], self.directions[a:b], self.power[a:b],
+                              falloff_center=cut(self.falloff_center),
+                              falloff_r2=cut(self.falloff_r2))
 
 
 def _cosine_directions(normals, u):
@@ -158,6 +171,7 @@ def emit_photons(scene: Scene, count: int, rng: np.random.Generator) -> EmittedP
                     for _, flux, spec in lights])
     share = np.maximum(np.floor(count * lum / lum.sum()).astype(int), 1)
     origins, directions, powers, per_light = [], [], [], {}
+    centers, r2s = [], []
     for (name, flux, spec), n in zip(lights, share):
         u = sampling.stratified_2d(1, n, rng)[0]           # directions / points, stratified
         v = rng.random((n, 2))
@@ -219,6 +233,10 @@ def emit_photons(scene: Scene, count: int, rng: np.random.Generator) -> EmittedP
             t, b = sampling.orthonormal_basis(d)
             disk = sampling.square_to_disk(v) * radius
             o = center - d * (2 * radius) + disk[:, 0:1] * t + disk[:, 1:2] * b
+        soft = kind in ("point", "spot") and spec[1].radius > 0 and \
+            getattr(spec[1], "soft_falloff", False)
+        centers.append(np.broadcast_to(spec[1].position if soft else np.zeros(3), (n, 3)))
+        r2s.append(np.full(n, spec[1].radius ** 2 if soft else 0.0))
         if kind in ("point", "spot") and spec[1].radius > 0:   # a sphere light (lights.py)
             o = sphere_emission_origins(spec[1].position, spec[1].radius, d, v)
         if kind in ("point", "spot", "area"):
@@ -229,8 +247,12 @@ def emit_photons(scene: Scene, count: int, rng: np.random.Generator) -> EmittedP
             o = o + away * offset_distance(o, scene.extent)[:, None]
         origins.append(o); directions.append(d); powers.append(power)
         per_light[name] = int(n)
+    r2 = np.concatenate(r2s)
+    soft = bool(np.any(r2 > 0))
     return EmittedPhotons(np.concatenate(origins), np.concatenate(directions),
-                          np.concatenate(powers), per_light)
+                          np.concatenate(powers), per_light,
+                          falloff_center=np.concatenate(centers) if soft else None,
+                          falloff_r2=r2 if soft else None)
 
 
 ESTIMATE_CHUNK = 8192           # queries per kd-tree call in PhotonMap.irradiance
@@ -472,6 +494,7 @@ def trace_photons(scene: Scene, accel, emitted: EmittedPhotons, rng: np.random.G
     d = np.ascontiguousarray(emitted.directions, np.float32)
     power = emitted.power.copy()
     depth = np.zeros(len(o), np.int32)
+    falloff_center, falloff_r2 = emitted.falloff_center, emitted.falloff_r2
     stored = {"positions": [], "power": [], "incoming": [], "normals": [], "bounces": []}
     absorbed = np.zeros(3)
     escaped = np.zeros(3)
@@ -491,8 +514,18 @@ def trace_photons(scene: Scene, accel, emitted: EmittedPhotons, rng: np.random.G
                 break
             o, d, t, prim = (np.take(a, keep, axis=0) for a in (o, d, t, prim))
             power, depth = np.take(power, keep, axis=0), depth[keep]
+            if falloff_r2 is not None:
+                falloff_center, falloff_r2 = falloff_center[keep], falloff_r2[keep]
         x = sampling.scale_rows(d, t)
         x += o
+        if falloff_r2 is not None:
+            # Soft Falloff (Cycles' facing disk): E = pi L R^2 / (d^2 + R^2) at the first hit,
+            # the sphere's photons give pi L R^2 / d^2 there: scale by d^2 / (d^2 + R^2).
+            dd = np.sum((x.astype(np.float64) - falloff_center) ** 2, axis=1)
+            scale = np.where(falloff_r2 > 0, dd / np.maximum(dd + falloff_r2, 1e-300), 1.0)
+            absorbed += np.einsum("ij,i->j", power, 1.0 - scale)
+            power = power * scale[:, None]
+            falloff_center = falloff_r2 = None
         n = np.take(normals_geo, prim, axis=0)
         flip = sampling.dot_rows(n, d) > 0                 # turn n towards the photon
         if flip.any():
@@ -718,7 +751,7 @@ def build_photon_map(scene: Scene, accel, count: int, seed: int = 0, max_bounces
 
     def trace(i):
         a, b = bounds[i]
-        part = EmittedPhotons(emitted.origins[a:b], emitted.directions[a:b], emitted.power[a:b])
+        part = emitted.subset(a, b)
         return trace_photons(scene, accel, part, sampling.rng_for(seed, sampling.STREAM_PHOTON, i + 1),
                              max_bounces=max_bounces, ray_log=ray_log, surfaces=surfaces)
 

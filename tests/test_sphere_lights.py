@@ -182,6 +182,30 @@ def test_photons_leave_the_sphere_with_cosine_directions_and_the_flux():
             assert np.abs(emitted.directions.mean(0)).max() < 0.02
 
 
+def test_soft_falloff_photons_are_dimmed_at_their_first_hit():
+    """A Soft Falloff light (Cycles' facing disk: E = pi L R^2 / (d^2 + R^2), where the
+    sphere's rays give pi L R^2 / d^2) scales each photon's power at its first hit by
+    d^2 / (d^2 + R^2), d from the light's centre; the flux taken off is booked as absorbed.
+    A sphere light (Soft Falloff off) keeps the power. Plane at z = 0, light 1 m up, R = 0.5:
+    the first-hit photons below it carry 0.8 of their emitted power."""
+    from lanterna.engine.accel import Accelerator
+    from lanterna.engine.photons import trace_photons
+
+    for soft in (True, False):
+        light = PointLight("Lamp", [0.0, 0.0, 1.0], [100.0] * 3, radius=0.5, soft_falloff=soft)
+        scene = plane_scene([light], rho=0.0)
+        emitted = emit_photons(scene, 4000, np.random.default_rng(5))
+        pmap = trace_photons(scene, Accelerator(scene.triangles, threads=1), emitted,
+                             np.random.default_rng(6))
+        first = pmap.bounces == 0
+        d2 = np.sum((pmap.positions[first].astype(np.float64) - light.position) ** 2, axis=1)
+        expected = (d2 / (d2 + 0.25) if soft else np.ones(len(d2)))[:, None] * \
+            emitted.power[0][None]
+        np.testing.assert_allclose(pmap.power[first], expected, rtol=1e-5)
+        booked = np.add(pmap.stats["flux_absorbed"], pmap.stats["flux_escaped"])
+        np.testing.assert_allclose(booked, emitted.power.sum(0), rtol=1e-6)
+
+
 # --- seen_light_radiance ---------------------------------------------------------------------
 def test_seen_light_radiance_sphere_disk_spot_and_nearest():
     sphere = PointLight("S", [0, 0, 0], 100.0, radius=0.5, soft_falloff=False)
