@@ -372,31 +372,8 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
                     usage[:, 0] += np.bincount(owner[covered], minlength=len(usage))
                     usage[:, 1] += np.bincount(owner[~covered], minlength=len(usage))
                 e *= (spp / min(photon.lookups, spp))
-                if glossy is not None and direct_light and not probe_lookup:
-                    # Glossy lobes at hits where the path ends: their indirect light from the
-                    # same irradiance, as if it came evenly from the hemisphere (where no
-                    # probe look-up is possible: indirect = photon).
-                    e_glossy = glossy.ending_albedo[ask] * e / np.pi
-                    if light is not None and depth == 0:
-                        e_through = glossy.ending_transmitted[ask] * e / np.pi
-                e *= surface.diffuse_over_pi[ask]
-                if glossy is not None:
-                    e *= glossy.diffuse_factor[ask][:, None]
-                    if light is not None and depth == 0:
-                        light.add(rays[ask], e, direct=False, kind=DIFFUSE)
-                    if direct_light and not probe_lookup:
-                        e += e_glossy
-                        if light is not None and depth == 0:
-                            light.add(rays[ask], e_glossy - e_through, direct=False,
-                                      kind=GLOSSY)
-                            light.add(rays[ask], e_through, direct=False, kind=TRANSMISSION)
-                elif light is not None and depth == 0:
-                    light.add(rays[ask], e, direct=False, kind=DIFFUSE)
-                if depth > 0:
-                    e *= thr[ask]
-                    if light is not None:
-                        light.add(rays[ask], e, direct=False)
-                add_to_pixels(indirect_sums, rays[ask] // spp, e)
+                _add_irradiance(e, ask, surface, glossy, thr, rays, spp, depth, indirect_sums,
+                                light, direct_light and not probe_lookup)
         if idx is not None and direct_light and context.caustics is not None:
             _shade_caustics(context, stats, idx, x, ns, surface, glossy, thr, rays, spp,
                             depth, indirect_sums, light, probe_lookup)
@@ -564,19 +541,29 @@ def _shade_caustics(context, stats, idx, x, ns, surface, glossy, thr, rays, spp,
     lit = np.flatnonzero(np.any(e > 0, axis=1))
     if len(lit) == 0:
         return
-    at, e = ask[lit], e[lit]
+    _add_irradiance(e[lit], ask[lit], surface, glossy, thr, rays, spp, depth, indirect_sums,
+                    light, not probe_lookup)
+
+
+def _add_irradiance(e, at, surface, glossy, thr, rays, spp, depth, indirect_sums, light,
+                    glossy_part):
+    """Irradiance ``e`` (k, 3) at the diffuse hits ``at`` into the Indirect part: x rho_d / pi
+    (below a Principled layer x its diffuse share) and, with ``glossy_part``, plus the glossy
+    lobes' albedo / pi at hits where the path ends (their indirect light as if it came
+    evenly: where no probe reads it, ``probe_lookup``); x the path's throughput after the
+    first hit; the light passes' kinds at the first hit (``passes.LightSums``)."""
     value = e * surface.diffuse_over_pi[at]
     if glossy is not None:
         value *= glossy.diffuse_factor[at][:, None]
         if light is not None and depth == 0:
             light.add(rays[at], value, direct=False, kind=DIFFUSE)
-            if not probe_lookup:
+        if glossy_part:
+            reflected = glossy.ending_albedo[at] * e / np.pi
+            if light is not None and depth == 0:
                 through = glossy.ending_transmitted[at] * e / np.pi
-                light.add(rays[at], glossy.ending_albedo[at] * e / np.pi - through,
-                          direct=False, kind=GLOSSY)
+                light.add(rays[at], reflected - through, direct=False, kind=GLOSSY)
                 light.add(rays[at], through, direct=False, kind=TRANSMISSION)
-        if not probe_lookup:
-            value += glossy.ending_albedo[at] * e / np.pi
+            value += reflected
     elif light is not None and depth == 0:
         light.add(rays[at], value, direct=False, kind=DIFFUSE)
     if depth > 0:
