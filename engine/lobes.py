@@ -335,20 +335,8 @@ class MicrofacetGlass:
         return mf.from_local(li, t, b, n), weight, pdf
 
     def albedo(self, wo, n):
-        mu = np.clip(_dot(wo, n), 0.0, 1.0)
-        r = np.sqrt(self.alpha)
-        R = mf.table("R", r, mu, self.eta)
-        G = mf.table("G", r, mu, self.eta)
-        reflected = sum(coefficient * mf.table(name, r, mu, e)[:, None]
-                        for coefficient, name, e in self.fresnel.table_terms())
-        if self.f0 is None:
-            carried = np.ones((len(mu), 3))
-        else:                                       # 1 - F' = (1 - F)(1 - f0) / (1 - F0)
-            F0 = fresnel_module.f0_from_ior(self.eta)[:, None]
-            carried = (1.0 - self.f0) / np.maximum(1.0 - F0, 1e-12)
-        transmitted = carried * np.clip(G - R, 0.0, None)[:, None]
-        total = reflected * self.reflection_tint + transmitted * self.transmission_tint
-        return total * self._scale(mu) * (mu > 0)[:, None]
+        reflected, transmitted = self.albedo_split(wo, n)
+        return reflected + transmitted
 
     def albedo_split(self, wo, n):
         """(reflected, transmitted) (N, 3): the two branches of ``albedo`` apart (Cycles'
@@ -361,7 +349,7 @@ class MicrofacetGlass:
                         for coefficient, name, e in self.fresnel.table_terms())
         if self.f0 is None:
             carried = np.ones((len(mu), 3))
-        else:
+        else:                                       # 1 - F' = (1 - F)(1 - f0) / (1 - F0)
             F0 = fresnel_module.f0_from_ior(self.eta)[:, None]
             carried = (1.0 - self.f0) / np.maximum(1.0 - F0, 1e-12)
         transmitted = carried * np.clip(G - R, 0.0, None)[:, None]
