@@ -81,7 +81,7 @@ from pathlib import Path
 import numpy as np
 
 from .sweep import figures, machine_info, time_for_error
-from .vs_cycles import REPO, BenchError, Parser, int_list, log
+from .vs_cycles import REPO, BenchError, Parser, int_list, log, run_command
 
 PROG = "lanterna bench --materials"
 SCENES = ("factory_cube", "principled_room", "metal_sphere", "mix_floor", "glass_caustic")
@@ -586,19 +586,10 @@ def run(args, argv) -> tuple[dict, int]:
 
 
 def main(argv=None) -> int:
-    argv = list(sys.argv[1:] if argv is None else argv)
-    try:
+    def body(argv):
         args = parse_args(argv)
-        if args.from_json:
-            return from_json(args)
-        _data, status = run(args, argv)
-        return status
-    except BenchError as exc:
-        print(f"lanterna bench: error: {' '.join(str(exc).split())}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("lanterna bench: interrupted", file=sys.stderr)
-        return 130
+        return from_json(args) if args.from_json else run(args, argv)[1]
+    return run_command(body, list(sys.argv[1:] if argv is None else argv))
 
 
 if __name__ == "__main__":

@@ -142,7 +142,7 @@ import numpy as np
 
 from .vs_cycles import (CACHE_DIR, CYCLES_SEED, DEFAULT_REFERENCE_SAMPLES, LANTERNA_SEED,
                            SCENE_TITLES, STORED_REFERENCES, STORED_RESOLUTION, BenchError,
-                           int_list, log, Parser, parse_resolution)
+                           int_list, log, Parser, parse_resolution, run_command)
 from ..engine.memory import peak_memory
 
 PROG = "lanterna bench --sweep"
@@ -1153,17 +1153,8 @@ def run(args, argv) -> tuple[dict, int]:
 
 
 def main(argv=None) -> int:
-    argv = list(sys.argv[1:] if argv is None else argv)
-    try:
-        args = parse_args(argv)
-        _results, status = run(args, argv)
-        return status
-    except BenchError as exc:
-        print(f"lanterna bench: error: {' '.join(str(exc).split())}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("lanterna bench: interrupted", file=sys.stderr)
-        return 130
+    return run_command(lambda a: run(parse_args(a), a)[1],
+                       list(sys.argv[1:] if argv is None else argv))
 
 
 if __name__ == "__main__":

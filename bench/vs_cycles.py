@@ -113,6 +113,19 @@ class BenchError(Exception):
     """An expected failure: printed as one line, no traceback."""
 
 
+def run_command(body, argv) -> int:
+    """A bench command's exit status: ``body(argv)`` returns it; a ``BenchError`` is printed
+    as one ``lanterna bench: error:`` line (status 2), Ctrl-C as ``interrupted`` (130)."""
+    try:
+        return body(argv)
+    except BenchError as exc:
+        print(f"lanterna bench: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("lanterna bench: interrupted", file=sys.stderr)
+        return 130
+
+
 class Parser(argparse.ArgumentParser):
     def error(self, message):
         raise BenchError(message)
@@ -682,17 +695,8 @@ def run(args) -> tuple[dict, int]:
 
 
 def main(argv=None) -> int:
-    argv = list(sys.argv[1:] if argv is None else argv)
-    try:
-        args = parse_args(argv)
-        _results, status = run(args)
-        return status
-    except BenchError as exc:
-        print(f"lanterna bench: error: {' '.join(str(exc).split())}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("lanterna bench: interrupted", file=sys.stderr)
-        return 130
+    return run_command(lambda a: run(parse_args(a))[1],
+                       list(sys.argv[1:] if argv is None else argv))
 
 
 if __name__ == "__main__":

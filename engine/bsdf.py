@@ -125,7 +125,6 @@ class MaterialTable:
         self.emitted_radiance = self.exitance / np.pi
         self.both_sides = table["both_sides"]
         self.diffuse_over_pi = self.diffuse / np.pi
-        self.transport_diffuse_over_pi = self.transport_diffuse / np.pi
         self.is_transport_specular = np.any(self.transport_specular > 0, axis=1)
         self.is_diffuse = np.any(self.diffuse > 0, axis=1)
         self.is_specular = np.any(self.specular > 0, axis=1)
@@ -171,7 +170,6 @@ class SurfaceParams:
     camera_glossy = property(lambda self: self._take("camera_glossy"))
     transport_diffuse = property(lambda self: self._take("transport_diffuse"))
     transport_specular = property(lambda self: self._take("transport_specular"))
-    transport_diffuse_over_pi = property(lambda self: self._take("transport_diffuse_over_pi"))
     is_transport_specular = property(lambda self: self._take("is_transport_specular"))
 
     def subset(self, index) -> "SurfaceParams":
