@@ -55,6 +55,7 @@ import numpy as np
 from . import fresnel as fresnel_model
 from . import microfacet
 from . import sampling
+from .textures import MaterialTextures
 from .lobes import MicrofacetGlass, MicrofacetReflection, SmoothGlass, SmoothReflection
 
 __all__ = ["MaterialTable", "SurfaceParams", "Lambertian", "PerfectMirror", "SurfaceBSDF",
@@ -101,8 +102,16 @@ class MaterialTable:
         table = scene.material_table()
         self.diffuse = table["diffuse"].astype(np.float64)
         self.specular = table["specular"].astype(np.float64)
+        self.exitance = table["exitance"].astype(np.float64)
+        # Node-driven inputs (issue 24): per-hit values through ``at``; the per-material rows
+        # and the lobes hold their means over the surface (``engine/textures.py``).
+        self.textures = MaterialTextures(scene)
+        self.textured = self.textures.textured
+        for material_id, (d, s, e) in self.textures.mean_reduction.items():
+            self.diffuse[material_id], self.specular[material_id] = d, s
+            self.exitance[material_id] = e
         # Glossy lobes (issue 23): per material a GlossyMaterial or None.
-        self.glossy = [glossy_material(getattr(m, "closures", ())) for m in scene.materials]
+        self.glossy = [glossy_material(closures) for closures in self.textures.mean_closures]
         self.camera_glossy = np.array([g is not None for g in self.glossy], bool)
         self.has_glossy = bool(self.camera_glossy.any())
         # Materials with a glass lobe (light passes through them).
@@ -113,15 +122,17 @@ class MaterialTable:
         # specular, but for a Principled specular layer, which takes its cosine-weighted mean
         # albedo E_avg from the diffuse below it (1 - max E_avg) and becomes a specular share
         # E_avg that photons and gather rays sample by its GGX lobe (``layer_average``).
-        self.transport_diffuse = self.diffuse.copy()
-        self.transport_specular = self.specular.copy()
+        # ``layer_kept`` (M,) 1 - max E_avg and ``layer_albedo`` (M, 3) E_avg per material.
+        self.layer_kept = np.ones(len(self.diffuse))
+        self.layer_albedo = np.zeros_like(self.diffuse)
         self.has_layer = any(g is not None and g.layer is not None for g in self.glossy)
         for material_id, spec in enumerate(self.glossy):
             if spec is not None and spec.layer is not None:
                 average = layer_average(spec.layer)
-                self.transport_diffuse[material_id] *= 1.0 - average.max()
-                self.transport_specular[material_id] += average
-        self.exitance = table["exitance"].astype(np.float64)
+                self.layer_kept[material_id] = 1.0 - average.max()
+                self.layer_albedo[material_id] = average
+        self.transport_diffuse = self.diffuse * self.layer_kept[:, None]
+        self.transport_specular = self.specular + self.layer_albedo
         self.emitted_radiance = self.exitance / np.pi
         self.both_sides = table["both_sides"]
         self.diffuse_over_pi = self.diffuse / np.pi
@@ -133,22 +144,34 @@ class MaterialTable:
         self.has_transport_specular = bool(self.is_transport_specular.any())
         self.has_emission = bool(self.is_emissive.any())
         self.count = len(self.diffuse)
-        # Every parameter is one value per material (no textures yet): stages may then work
-        # on per-material tables (the camera's histogram of direct light per material).
-        self.constant_per_material = True
+        # Where no input is node-driven every parameter is one value per material: stages
+        # may then work on per-material tables (the camera's histogram of direct light).
+        self.constant_per_material = not self.textures.any
 
-    def at(self, material_ids: np.ndarray) -> "SurfaceParams":
+    def at(self, material_ids: np.ndarray, prim=None, bu=None, bv=None) -> "SurfaceParams":
         """The parameters at hits on triangles of ``material_ids`` (N,): the one function
-        through which every stage reads a material."""
-        return SurfaceParams(self, np.asarray(material_ids))
+        through which every stage reads a material. ``prim`` (N,) the triangles and (bu, bv)
+        the barycentrics of the hits: textured materials read their per-hit values there
+        (without them, their means over the surface)."""
+        return SurfaceParams(self, np.asarray(material_ids), prim, bu, bv)
+
+
+# SurfaceParams slots that textures make per-hit (the rest stay per material).
+TEXTURED_SLOTS = ("diffuse", "specular", "exitance", "diffuse_over_pi", "emitted_radiance",
+                  "transport_diffuse", "transport_specular")
 
 
 class SurfaceParams:
-    """Material parameters per hit (N,) or (N, 3), each fetched when first asked for."""
+    """Material parameters per hit (N,) or (N, 3), each fetched when first asked for; at hits
+    on textured materials (``MaterialTable.textured``) with their (prim, bu, bv) given, the
+    ``TEXTURED_SLOTS`` hold the per-hit values (``textures.MaterialTextures.reduction``)."""
 
-    def __init__(self, table: MaterialTable, material: np.ndarray):
+    def __init__(self, table: MaterialTable, material: np.ndarray, prim=None, bu=None,
+                 bv=None):
         self.table = table
         self.material = material            # (N,) material ids (per-material fast paths)
+        self.hits = None if prim is None or not table.textures.any else (
+            np.asarray(prim), np.asarray(bu), np.asarray(bv))
         self._cache = {}
 
     def __len__(self):
@@ -156,8 +179,30 @@ class SurfaceParams:
 
     def _take(self, name):
         if name not in self._cache:
-            self._cache[name] = np.take(getattr(self.table, name), self.material, axis=0)
+            if self.hits is not None and name in TEXTURED_SLOTS:
+                self._textured_slots()
+            else:
+                self._cache[name] = np.take(getattr(self.table, name), self.material, axis=0)
         return self._cache[name]
+
+    def _textured_slots(self) -> None:
+        """Every ``TEXTURED_SLOTS`` entry: the per-material rows, with the rows of hits on
+        textured materials replaced by their per-hit values."""
+        table, material = self.table, self.material
+        diffuse = np.take(table.diffuse, material, axis=0)
+        specular = np.take(table.specular, material, axis=0)
+        exitance = np.take(table.exitance, material, axis=0)
+        prim, bu, bv = self.hits
+        for material_id in np.unique(material[table.textured[material]]):
+            at = np.flatnonzero(material == material_id)
+            d, s, e = table.textures.reduction(int(material_id), prim[at], bu[at], bv[at])
+            diffuse[at], specular[at], exitance[at] = d, s, e
+        cache = self._cache
+        cache["diffuse"], cache["specular"], cache["exitance"] = diffuse, specular, exitance
+        cache["diffuse_over_pi"] = diffuse / np.pi
+        cache["emitted_radiance"] = exitance / np.pi
+        cache["transport_diffuse"] = diffuse * np.take(table.layer_kept, material)[:, None]
+        cache["transport_specular"] = specular + np.take(table.layer_albedo, material, axis=0)
 
     diffuse = property(lambda self: self._take("diffuse"))
     specular = property(lambda self: self._take("specular"))
@@ -174,7 +219,11 @@ class SurfaceParams:
 
     def subset(self, index) -> "SurfaceParams":
         """The parameters of the hits ``index`` (an index array or mask)."""
-        return SurfaceParams(self.table, self.material[index])
+        out = SurfaceParams(self.table, self.material[index])
+        if self.hits is not None:
+            out.hits = tuple(h[index] for h in self.hits)
+            out._cache = {k: v[index] for k, v in self._cache.items() if k in TEXTURED_SLOTS}
+        return out
 
     def bsdf(self, transport: bool = False) -> "SurfaceBSDF":
         """The seed's BSDF at these hits; ``transport``: as photons and gather rays see it

@@ -255,12 +255,13 @@ def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfa
     for bounce in range(max_specular + 1):
         if len(ray_of) == 0:
             break
-        tt, prim, _u, _v = accel.intersect(origins, dirs)
+        tt, prim, bu, bv = accel.intersect(origins, dirs)
         rays += len(ray_of)
         hit = prim >= 0
         if bounce == 0:
             distance[ray_of[hit]] = tt[hit]
         ray_of, origins, dirs, tt, prim = ray_of[hit], origins[hit], dirs[hit], tt[hit], prim[hit]
+        bu, bv = bu[hit], bv[hit]
         if throughput is not None:
             throughput = throughput[hit]
         if len(ray_of) == 0:
@@ -269,7 +270,7 @@ def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfa
         ng = surfaces.geometric_normals[prim].astype(np.float64)
         facing = np.einsum("ij,ij->i", ng, dirs) > 0
         ng[facing] *= -1                                   # towards the gather ray
-        surface = surfaces.params(prim)
+        surface = surfaces.params(prim, bu, bv)
         if bounce > 0 and mirrored_emission and surfaces.materials.has_emission:
             # An emitter seen in a mirror is indirect light at the gather point (its direct
             # light is the emitters it sees straight): counted here, or it was lost.

@@ -292,7 +292,7 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
         x = sampling.scale_rows(d, t_hit)
         x += o
         ng, ns, front = surfaces.normals(prim, bu, bv, d)
-        surface = surfaces.params(prim)
+        surface = surfaces.params(prim, bu, bv)
 
         if materials.has_emission:
             emitted = surface.emitted_radiance * (front | surface.both_sides)[:, None]
@@ -491,7 +491,7 @@ def emitter_edges(scene, accel, surfaces, filter_width: float):
 def _seen_emission(scene, accel, surfaces, origins, directions, tmax, split=False):
     """Radiance (N, 3) the rays see first: an emitter's (on its emitting side) or the world's
     where they miss; 0 on other surfaces. ``split``: also the world's part alone."""
-    _t, prim, _bu, _bv = accel.intersect(origins, directions, tmax)
+    _t, prim, bu, bv = accel.intersect(origins, directions, tmax)
     out = np.zeros((len(origins), 3))
     hit = prim >= 0
     if not scene.world.is_black:
@@ -500,7 +500,7 @@ def _seen_emission(scene, accel, surfaces, origins, directions, tmax, split=Fals
         p = prim[hit]
         front = sampling.dot_rows(np.take(surfaces.geometric_normals, p, axis=0),
                                   directions[hit]) < 0
-        surface = surfaces.params(p)
+        surface = surfaces.params(p, bu[hit], bv[hit])
         out[hit] = surface.emitted_radiance * (front | surface.both_sides)[:, None]
     if split:
         return out, np.where(hit[:, None], 0.0, out)
@@ -674,8 +674,7 @@ class _GlossyHits:
             if spec.layer is not None:
                 self.diffuse_factor[hits] = spec.diffuse_factor(wo_h, n_h)
             albedo = sum(w[None, :] * lobe.albedo(wo_h, n_h) for w, lobe, _ in lobes)
-            diffuse = materials.diffuse[material_id][None, :] * \
-                self.diffuse_factor[hits][:, None]
+            diffuse = surface.diffuse[hits] * self.diffuse_factor[hits][:, None]
             goes_on = albedo.max(axis=1) > diffuse.max(axis=1)
             self.goes_on[hits] = goes_on
             self.ending_albedo[hits] = albedo * ~goes_on[:, None]

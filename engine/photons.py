@@ -151,7 +151,10 @@ def _light_fluxes(scene: Scene):
             surface = materials.at(mids)
             sides = np.where(surface.both_sides, 2.0, 1.0)
             flux = (surface.exitance * (areas * sides)[:, None]).sum(0)
-            out.append(("emissive meshes", flux, ("mesh", emissive, areas * sides, mids)))
+            # Triangles are picked by their flux's luminance (textured: their material's
+            # mean exitance), each photon then carries the exitance at its own point.
+            picks = areas * sides * (surface.exitance @ LUMINANCE)
+            out.append(("emissive meshes", flux, ("mesh", emissive, picks, mids)))
     if not scene.world.is_black:
         out.append(("World", scene.world.radiance * 4 * np.pi ** 2 * radius ** 2,
                     ("world", center, radius)))
@@ -216,7 +219,9 @@ def emit_photons(scene: Scene, count: int, rng: np.random.Generator) -> EmittedP
             o = tri[:, 0] * (1 - bary[:, 0:1] - bary[:, 1:2]) + tri[:, 1] * bary[:, 0:1] + tri[:, 2] * bary[:, 1:2]
             nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
             nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
-            surface = MaterialTable(scene).at(scene.material_ids[tri_idx[pick]])
+            prim = tri_idx[pick]
+            table = MaterialTable(scene)
+            surface = table.at(scene.material_ids[prim], prim, bary[:, 0], bary[:, 1])
             both = surface.both_sides
             flip = both & (rng.random(n) < 0.5)
             nrm[flip] *= -1
@@ -224,9 +229,11 @@ def emit_photons(scene: Scene, count: int, rng: np.random.Generator) -> EmittedP
             # Leave the emitting surface (it is geometry too), as accel.offset_origins does.
             eps = offset_distance(o, scene.extent)
             o = o + nrm * eps[:, None]
-            # Per-photon colour: each triangle's exitance, normalised to the meshes' flux.
+            # Per-photon colour: the exitance at its point over the luminance its triangle
+            # was picked by (its material's mean), scaled to the meshes' flux.
             m = surface.exitance
-            power = m / np.maximum((m @ LUMINANCE)[:, None], 1e-30) * (flux @ LUMINANCE) / n
+            picked = table.exitance[scene.material_ids[prim]] @ LUMINANCE
+            power = m / np.maximum(picked[:, None], 1e-30) * (flux @ LUMINANCE) / n
         else:  # world
             center, radius = spec[1], spec[2]
             d = -sampling.square_to_sphere(u)                 # travelling inwards
@@ -505,14 +512,14 @@ def trace_photons(scene: Scene, accel, emitted: EmittedPhotons, rng: np.random.G
         rays += len(o)
         if ray_log is not None:
             ray_log.append(("photon", o, d, None))
-        t, prim, _u, _v = accel.intersect(o, d)
+        t, prim, bu, bv = accel.intersect(o, d)
         hit = prim >= 0
         if not hit.all():
             escaped += power[~hit].sum(axis=0)
             keep = np.flatnonzero(hit)
             if len(keep) == 0:
                 break
-            o, d, t, prim = (np.take(a, keep, axis=0) for a in (o, d, t, prim))
+            o, d, t, prim, bu, bv = (np.take(a, keep, axis=0) for a in (o, d, t, prim, bu, bv))
             power, depth = np.take(power, keep, axis=0), depth[keep]
             if falloff_r2 is not None:
                 falloff_center, falloff_r2 = falloff_center[keep], falloff_r2[keep]
@@ -530,7 +537,7 @@ def trace_photons(scene: Scene, accel, emitted: EmittedPhotons, rng: np.random.G
         flip = sampling.dot_rows(n, d) > 0                 # turn n towards the photon
         if flip.any():
             n[flip] *= -1
-        surface = surfaces.params(prim)
+        surface = surfaces.params(prim, bu, bv)
         if caustic:
             # Caustic paths: the first hit must be specular; diffuse stores need a specular
             # bounce before them.
@@ -839,11 +846,11 @@ def specular_share(scene: Scene, accel, seed: int = 0, count: int = CAUSTIC_PILO
     emitted = emit_photons(scene, count, sampling.rng_for(seed, sampling.STREAM_CAUSTIC, 0))
     if len(emitted.origins) == 0:
         return 0.0, 0.0
-    _t, prim, _u, _v = accel.intersect(np.ascontiguousarray(emitted.origins, np.float32),
+    _t, prim, bu, bv = accel.intersect(np.ascontiguousarray(emitted.origins, np.float32),
                                        np.ascontiguousarray(emitted.directions, np.float32))
     hit = prim >= 0
     passed = np.zeros(len(prim))
-    passed[hit] = surfaces.params(prim[hit]).transport_specular.max(axis=1)
+    passed[hit] = surfaces.params(prim[hit], bu[hit], bv[hit]).transport_specular.max(axis=1)
     weight = emitted.power @ LUMINANCE
     total = float(weight.sum())
     if not total > 0:

@@ -22,7 +22,9 @@ world ``radiance``  W m^-2 sr^-1 per channel, a uniform environment
 
 Triangles are stored as a float32 array ``(T, 3, 3)`` (triangle, corner, xyz) with per-corner
 shading normals of the same shape, a material id and an object id per triangle. Surfaces are
-two-sided; the geometric normal is turned towards the incoming ray at shading time.
+two-sided; the geometric normal is turned towards the incoming ray at shading time. Textured
+materials read per-corner coordinates (``corner_attributes``: UV maps, object-space position
+and normal, generated coordinates; ``engine/textures.py``) through ``Material.graph``.
 
 :func:`Scene.validate` checks shapes, dtypes and values and drops triangles that cannot be
 traced (NaN or infinite corners, zero area), counting them in ``warnings``.
@@ -96,6 +98,9 @@ class Material:
     # The Blender shader's weighted closures (``engine/shaders.py``), kept for the material
     # system and the Material panel; the three properties above are what is rendered today.
     closures: tuple = ()
+    # The node graph (``engine.nodes.Graph``) that node-driven closure inputs read
+    # (``Closure.textures``; ``engine/textures.py``); None when no input is node-driven.
+    graph: object = None
 
     def __post_init__(self):
         self.diffuse = _rgb(self.diffuse, self.name, "diffuse reflectance")
@@ -380,6 +385,9 @@ class Scene:
     world: World = field(default_factory=World)
     warnings: list[str] = field(default_factory=list)
     stats: dict = field(default_factory=dict)
+    # Per-corner coordinates that textured materials read, name -> (T, 3, k) float32
+    # ("uv", "uv:<name>", "position", "normal", "generated"; ``engine/textures.py``).
+    corner_attributes: dict = field(default_factory=dict)
 
     def __post_init__(self):
         if self.object_ids is None:
@@ -439,6 +447,13 @@ class Scene:
                     f"{cam.clip_end:g} m, so the camera sees nothing and the picture is black")
             if text not in self.warnings:          # validate may run more than once
                 self.warnings.append(text)
+        for key, corner in list(self.corner_attributes.items()):
+            corner = np.asarray(corner, np.float32)
+            if corner.ndim != 3 or corner.shape[:2] != (count, 3):
+                raise SceneError(f"Scene: corner attribute '{key}' must have shape (T, 3, k) "
+                                 f"for the {count} triangles, not {corner.shape}")
+            corner = np.where(np.isfinite(corner), corner, 0.0).astype(np.float32)
+            self.corner_attributes[key] = np.ascontiguousarray(corner[keep])
         self.triangles = np.ascontiguousarray(tris[keep])
         self.material_ids = np.ascontiguousarray(mids[keep])
         self.object_ids = np.ascontiguousarray(oids[keep])

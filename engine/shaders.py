@@ -101,6 +101,11 @@ class Closure:
     params: dict = field(default_factory=dict)
     node: str = ""
     distribution: str = ""
+    # Inputs driven by shader nodes (issue 24): parameter -> factors whose product is its
+    # per-hit value, each ``(socket, constant)``: ``socket`` a (node, output identifier) of the
+    # material's ``nodes.Graph`` or None for the constant (a Mix of colour x strength is two
+    # factors). ``params`` then holds the value's mean over the surface (``engine/textures.py``).
+    textures: dict = field(default_factory=dict)
 
     def __post_init__(self):
         if self.kind not in CLOSURE_KINDS:
@@ -119,7 +124,16 @@ class Closure:
     def scaled(self, factor) -> "Closure":
         """This closure with its weight multiplied by ``factor`` (a scalar or RGB)."""
         return Closure(self.kind, self.weight * np.asarray(factor, np.float64), dict(self.params),
-                       self.node, self.distribution)
+                       self.node, self.distribution, dict(self.textures))
+
+    def at_hits(self, params: dict) -> "Closure":
+        """A copy whose parameters are ``params``, per-hit arrays ((N,) numbers, (N, 3)
+        colours) allowed, taken as they are (no defaults filled, no checks): what
+        ``engine/textures.py`` hands to :func:`seed_reduction` at textured hits."""
+        out = object.__new__(Closure)
+        out.kind, out.weight, out.params = self.kind, self.weight, params
+        out.node, out.distribution, out.textures = self.node, self.distribution, {}
+        return out
 
 
 @dataclass
@@ -139,32 +153,39 @@ def _fmt(value) -> str:
     return "(" + ", ".join(f"{x:.3g}" for x in arr) + ")"
 
 
+def _per_hit(value) -> np.ndarray:
+    """A number, or (N,) per-hit numbers as an (N, 1) column that multiplies (N, 3) colours."""
+    value = np.asarray(value, np.float64)
+    return value[:, None] if value.ndim == 1 else value
+
+
 def _principled(c: Closure, note):
     p = c.params
     name = f"'{c.node}'"
-    metallic = float(np.clip(p["metallic"], 0, 1))
-    transmission = float(np.clip(p["transmission"], 0, 1))
+    metallic = _per_hit(np.clip(p["metallic"], 0, 1))
+    transmission = _per_hit(np.clip(p["transmission"], 0, 1))
     base = p["base_color"]
     diffuse = base * (1 - metallic) * (1 - transmission)
     # The transmission is a glass lobe (``bsdf.GlassLobe``); here its share of the roulette.
     specular = base * metallic + (1 - metallic) * transmission * np.sqrt(np.clip(base, 0, None))
     exitance = math.pi * p["emission"]
-    if transmission > 0 and p["thin_wall"] > 0:
+    metallic_max, transmission_max = float(np.max(metallic)), float(np.max(transmission))
+    if transmission_max > 0 and np.any(p["thin_wall"] > 0):
         note(f"Thin Wall of {name} is ignored: its transmission is rendered as a solid "
              "glass object's surface")
-    if p["coat_weight"] > 0:
+    if np.any(p["coat_weight"] > 0):
         note(f"Coat Weight of {name} is ignored")
-    if p["sheen_weight"] > 0:
+    if np.any(p["sheen_weight"] > 0):
         note(f"Sheen Weight of {name} is ignored")
-    if p["alpha"] < 1:
+    if np.any(p["alpha"] < 1):
         note(f"Alpha < 1 of {name} is ignored (rendered opaque)")
-    if p["subsurface_weight"] > 0 and metallic < 1 and transmission < 1:
-        note(f"Subsurface Weight {_fmt(p['subsurface_weight'])} of {name} is approximated: "
+    if np.any(p["subsurface_weight"] > 0) and metallic_max < 1 and transmission_max < 1:
+        note(f"Subsurface Weight {_fmt(np.mean(p['subsurface_weight']))} of {name} is approximated: "
              "rendered as a diffuse lobe of the Base Color (no subsurface scattering)")
-    if p["diffuse_roughness"] > 0 and metallic < 1 and transmission < 1:
-        note(f"Diffuse Roughness {_fmt(p['diffuse_roughness'])} of {name} (Oren-Nayar) is "
+    if np.any(p["diffuse_roughness"] > 0) and metallic_max < 1 and transmission_max < 1:
+        note(f"Diffuse Roughness {_fmt(np.mean(p['diffuse_roughness']))} of {name} (Oren-Nayar) is "
              "rendered as Lambertian")
-    if p["thin_film_thickness"] > 0:
+    if np.any(p["thin_film_thickness"] > 0):
         note(f"Thin Film of {name} is ignored (the Fresnel has no interference)")
     return diffuse, specular, exitance
 
@@ -187,8 +208,8 @@ def seed_reduction(closures) -> SeedMaterial:
             d, s, e = _principled(c, note)
         elif c.kind == "diffuse":
             d = p["color"]
-            if p["roughness"] > 0:
-                note(f"Roughness {_fmt(p['roughness'])} of Diffuse BSDF {name} (Oren-Nayar) is "
+            if np.any(p["roughness"] > 0):
+                note(f"Roughness {_fmt(np.mean(p['roughness']))} of Diffuse BSDF {name} (Oren-Nayar) is "
                      "rendered as Lambertian")
         elif c.kind == "emission":
             e = math.pi * p["radiance"]
@@ -209,7 +230,7 @@ def seed_reduction(closures) -> SeedMaterial:
             d = p["color"]
             label = "Translucent BSDF" if c.kind == "translucent" else "Sheen BSDF"
             note(f"{label} {name} is not supported; treated as a diffuse of colour {_fmt(d)}")
-        if c.kind in ("metallic", "glass") and p["thin_film_thickness"] > 0:
+        if c.kind in ("metallic", "glass") and np.any(p["thin_film_thickness"] > 0):
             label = "Metallic BSDF" if c.kind == "metallic" else "Glass BSDF"
             note(f"Thin Film of {label} {name} is ignored (the Fresnel has no interference)")
         diffuse = diffuse + w * d

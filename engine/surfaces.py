@@ -11,8 +11,9 @@ What it computes
         normal (interpolated from the corners; the geometric one where the mesh is flat or
         the interpolated one faces away from the viewer) and whether the wound front side
         was hit. Blender meshes have any winding, so every surface is two-sided (DESIGN §3).
-    ``params(prim)``  the material parameters at hits on triangles ``prim``
-        (``MaterialTable.at``).
+    ``params(prim, bu, bv)``  the material parameters at hits on triangles ``prim`` with
+        barycentrics (bu, bv) (``MaterialTable.at``; textured materials need the barycentrics
+        for their per-hit values, and give their means without them).
 """
 from __future__ import annotations
 
@@ -36,9 +37,9 @@ class SceneSurfaces:
             if not np.any(np.abs(agree) < 0.99999):
                 self.shading_normals = None
 
-    def params(self, prim: np.ndarray) -> SurfaceParams:
-        """Material parameters at hits on triangles ``prim``."""
-        return self.materials.at(self.material_ids[prim])
+    def params(self, prim: np.ndarray, bu=None, bv=None) -> SurfaceParams:
+        """Material parameters at hits on triangles ``prim`` with barycentrics (bu, bv)."""
+        return self.materials.at(self.material_ids[prim], prim, bu, bv)
 
     def normals(self, prim, bu, bv, d):
         """(ng, ns, front) at hits of rays ``d`` (module docstring)."""

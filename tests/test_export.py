@@ -414,22 +414,48 @@ def test_a_loop_of_shader_nodes_is_named_in_a_warning():
     assert any("'Mix A'" in w and "'Mix B'" in w for w in loops), loops
 
 
-def test_texture_gives_one_warning_and_default_colour():
+def test_unsupported_texture_gives_one_warning_and_default_colour():
     scene = reset()
     add_camera(scene)
     mat = new_material("Wood")
     p = principled(mat)
     p.inputs["Base Color"].default_value = (0.3, 0.2, 0.1, 1.0)
-    tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+    tex = mat.node_tree.nodes.new("ShaderNodeTexBrick")     # not in the node evaluator
     mat.node_tree.links.new(tex.outputs["Color"], p.inputs["Base Color"])
     for name in ("Plank1", "Plank2", "Plank3"):
         add_cube(scene, name).data.materials.append(mat)
     s = export()
     wood = [w for w in s.warnings if "Wood" in w and "driven by" in w]
     assert len(wood) == 1       # one per material and socket, not one per object
-    assert "Material 'Wood'" in wood[0] and "Base Color" in wood[0] and "Image Texture" in wood[0]
+    assert "Material 'Wood'" in wood[0] and "Base Color" in wood[0] and "Brick" in wood[0]
     np.testing.assert_allclose(material_of(s, "Wood").diffuse, [0.3, 0.2, 0.1], rtol=1e-6)
+    assert not material_of(s, "Wood").closures[0].textures
     assert len(s.materials) == 1
+
+
+def test_image_texture_on_base_color_is_per_hit():
+    """An Image Texture on Base Color: no warning, the closure's base_color is node-driven,
+    the UV map goes onto the scene and the material's mean is the texture's (a uniform 8-bit
+    sRGB image of 0.5, stored as the byte 128: 0.2159 linear)."""
+    from lanterna.engine.bsdf import MaterialTable
+    scene = reset()
+    add_camera(scene)
+    mat = new_material("Wood")
+    p = principled(mat)
+    tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+    tex.image = bpy.data.images.new("Grey", 2, 2)
+    tex.image.pixels.foreach_set(np.full(16, 0.5, np.float32))
+    mat.node_tree.links.new(tex.outputs["Color"], p.inputs["Base Color"])
+    add_cube(scene, "Plank").data.materials.append(mat)
+    s = export()
+    assert not [w for w in s.warnings if "Wood" in w and "driven by" in w]
+    wood = material_of(s, "Wood")
+    assert "base_color" in wood.closures[0].textures and wood.graph is not None
+    assert set(s.corner_attributes) == {"uv"}
+    assert s.corner_attributes["uv"].shape == (len(s.triangles), 3, 2)
+    table = MaterialTable(s)
+    mid = s.materials.index(wood)
+    np.testing.assert_allclose(table.diffuse[mid], ((128 / 255 + 0.055) / 1.055) ** 2.4, rtol=1e-6)
 
 
 def test_material_slots_map_per_face():

@@ -620,7 +620,11 @@ def test_emissive_mesh_emission():
     flux = np.array([3.0, 2.0, 1.0]) * 2.0 + np.array([1.0, 1.0, 4.0]) * 0.5 * 2
     assert em.per_light == {"emissive meshes": n}
     on_a = em.origins[:, 0] < 2.0
-    share_a = 2.0 / (2.0 + 0.5 * 2)
+    # Photons per quad in proportion to its luminance flux (they were once picked by area
+    # alone, 2 / 3 here, while carrying the same power: the one-sided quad got 3.66 of its
+    # 4.28 units of luminance flux).
+    flux_a = (np.array([3.0, 2.0, 1.0]) @ LUMINANCE) * 2.0
+    share_a = flux_a / (flux_a + (np.array([1.0, 1.0, 4.0]) @ LUMINANCE) * 0.5 * 2)
     assert abs(on_a.mean() - share_a) < 5 * np.sqrt(share_a * (1 - share_a) / n)
     lum = flux @ LUMINANCE
     for mask, m in ((on_a, np.array([3.0, 2.0, 1.0])), (~on_a, np.array([1.0, 1.0, 4.0]))):

@@ -39,9 +39,14 @@ animation already applied by Blender) and turns it into the renderer's inert sce
   - Translucent, Subsurface, Sheen, Toon, hair and other shaders with a colour: treated as a
     diffuse of that colour. Transparent and Holdout: black. Anything else: default grey.
 
-  Inputs fed by a Color (RGB) or Value node take that node's value; any other link (a texture,
-  a math node ...) is reported once per material and socket and the socket's default value is
-  used. rho_d and rho_s are clipped to [0, 1] and scaled down per channel where
+  Inputs fed by a Color (RGB) or Value node take that node's value. An input driven by nodes
+  the evaluator supports (``engine/nodes.py``: textures, maths, colour nodes ...) becomes
+  per-hit (``Closure.textures``, the material's ``graph``; ``engine/textures.py`` says what
+  follows the texture at each hit and what takes its mean, and each approximation is
+  reported); the per-corner coordinates the graphs read (UV maps, object-space position and
+  normal, generated coordinates) go onto ``Scene.corner_attributes``. Any other link is
+  reported once per material and socket, naming the node it cannot evaluate, and the socket's
+  default value is used. rho_d and rho_s are clipped to [0, 1] and scaled down per channel where
   rho_d + rho_s > 1, with a warning. Emissive meshes need no light objects: the core builds
   mesh lights from triangles whose material has ``exitance`` > 0 (``emit_both_sides`` True,
   as Cycles emits from both faces).
@@ -121,7 +126,10 @@ import bpy
 
 from ..settings import RenderSettings
 from . import compat
+from .. import nodes
+from .. import textures
 from ..shaders import CLOSURE_KINDS, Closure, seed_reduction
+from .node_export import export_graph
 from ..scene import (AREA_SHAPES, AreaLight, Camera, Material, PointLight, Scene, SceneError,
                      SpotLight, SunLight, World)
 
@@ -181,6 +189,10 @@ class _MeshData:
     tri_loops: np.ndarray   # (T*3,) int32 into corner_normals
     corner_normals: np.ndarray  # (L, 3) float32, object space
     mat_index: np.ndarray   # (T,) int32, material slot per triangle
+    corner_loops: np.ndarray | None = None   # (T*3,) int32 into the mesh's corners (UVs)
+    uv_maps: dict = dataclasses.field(default_factory=dict)   # name -> (L, 2) float32
+    active_uv: str = ""     # the active render UV map's name
+    texspace: tuple | None = None   # (location (3,), size (3,)) of the texture space
 
     @property
     def count(self) -> int:
@@ -238,6 +250,12 @@ def _read_mesh(mesh) -> _MeshData | None:
         mat_index = np.empty(n_tri, np.int32)
         tris.foreach_get("material_index", mat_index)
 
+    corner_loops = tri_loops
+    uv_maps, active_uv = _read_uv_maps(mesh, n_corner)
+    location = getattr(mesh, "texspace_location", None)
+    size = getattr(mesh, "texspace_size", None)
+    texspace = None if location is None or size is None else (
+        np.array(location[:3], np.float64), np.array(size[:3], np.float64))
     corner = getattr(mesh, "corner_normals", None)
     if corner is not None and len(corner) == n_corner:
         normals = np.empty(n_corner * 3, np.float32)
@@ -246,7 +264,55 @@ def _read_mesh(mesh) -> _MeshData | None:
         normals = np.empty(n_tri * 9, np.float32)
         tris.foreach_get("split_normals", normals)
         tri_loops = np.arange(n_tri * 3, dtype=np.int32)
-    return _MeshData(co.reshape(-1, 3), tri_verts, tri_loops, normals.reshape(-1, 3), mat_index)
+    return _MeshData(co.reshape(-1, 3), tri_verts, tri_loops, normals.reshape(-1, 3), mat_index,
+                     corner_loops, uv_maps, active_uv, texspace)
+
+
+def _read_uv_maps(mesh, n_corner: int):
+    """({name: (L, 2) float32}, the active render map's name) of ``mesh``'s UV maps."""
+    maps, active = {}, ""
+    layers = getattr(mesh, "uv_layers", None)
+    if layers is None or n_corner == 0:
+        return maps, active
+    for layer in layers:
+        out = np.empty(n_corner * 2, np.float32)
+        data = getattr(layer, "uv", None)
+        if data is not None and len(data) == n_corner:
+            data.foreach_get("vector", out)
+        else:
+            layer.data.foreach_get("uv", out)
+        maps[layer.name] = out.reshape(-1, 2)
+        if getattr(layer, "active_render", False):
+            active = layer.name
+    if not active and maps:
+        current = getattr(layers, "active", None)
+        active = current.name if current is not None else next(iter(maps))
+    return maps, active
+
+
+def _corner_attribute(data: _MeshData, key: str) -> np.ndarray:
+    """(T, 3, k) float32: one per-corner coordinate of a mesh's triangles (object space;
+    ``Scene.corner_attributes``); zeros where the mesh lacks it (a UV map it has not)."""
+    n_tri = data.count
+    if key == "position":
+        return data.co[data.tri_verts].reshape(n_tri, 3, 3)
+    if key == "normal":
+        return data.corner_normals[data.tri_loops].reshape(n_tri, 3, 3)
+    if key == "generated":
+        co = data.co.astype(np.float64)
+        if data.texspace is not None:
+            location, size = data.texspace
+        else:
+            low, high = co.min(axis=0), co.max(axis=0)
+            location, size = (low + high) / 2, (high - low) / 2
+        size = np.where(np.abs(size) > 1e-12, size, 1.0)
+        generated = (co - (location - size)) / (2.0 * size)
+        return generated[data.tri_verts].astype(np.float32).reshape(n_tri, 3, 3)
+    name = data.active_uv if key == "uv" else key[3:]
+    uv = data.uv_maps.get(name)
+    if uv is None:
+        return np.zeros((n_tri, 3, 2), np.float32)
+    return uv[data.corner_loops].reshape(n_tri, 3, 2)
 
 
 def _gather_rows(src: np.ndarray, index: np.ndarray, out: np.ndarray) -> None:
@@ -280,12 +346,109 @@ class _Group:
 # ---------------------------------------------------------------------------------------------
 # Materials
 # ---------------------------------------------------------------------------------------------
-class _NodeReader:
-    """Evaluates a material's (or world's) shader nodes into constant radiometric values."""
+# The sockets each closure parameter is read from (the names ``_NodeReader.colour`` /
+# ``scalar`` are asked for), in order: a parameter of two sockets is their product.
+_PARAM_SOCKETS = {
+    "principled": {
+        "base_color": [("Base Color",)], "metallic": [("Metallic",)],
+        "roughness": [("Roughness",)], "ior": [("IOR",)], "alpha": [("Alpha",)],
+        "diffuse_roughness": [("Diffuse Roughness",)],
+        "subsurface_weight": [("Subsurface Weight",)],
+        "specular_ior_level": [("Specular IOR Level",)], "specular_tint": [("Specular Tint",)],
+        "anisotropic": [("Anisotropic",)], "anisotropic_rotation": [("Anisotropic Rotation",)],
+        "transmission": [("Transmission Weight", "Transmission")],
+        "coat_weight": [("Coat Weight",)], "coat_roughness": [("Coat Roughness",)],
+        "coat_ior": [("Coat IOR",)], "coat_tint": [("Coat Tint",)],
+        "sheen_weight": [("Sheen Weight",)], "sheen_roughness": [("Sheen Roughness",)],
+        "sheen_tint": [("Sheen Tint",)],
+        "emission": [("Emission Color", "Emission"), ("Emission Strength",)],
+        "thin_film_thickness": [("Thin Film Thickness",)], "thin_film_ior": [("Thin Film IOR",)],
+    },
+    "diffuse": {"color": [("Color",)], "roughness": [("Roughness",)]},
+    "emission": {"radiance": [("Color",), ("Strength",)]},
+    "glossy": {"color": [("Color",)], "roughness": [("Roughness",)],
+               "anisotropy": [("Anisotropy",)], "rotation": [("Rotation",)]},
+    "metallic": {"base_color": [("Base Color",)], "edge_tint": [("Edge Tint",)],
+                 "roughness": [("Roughness",)], "anisotropy": [("Anisotropy",)],
+                 "rotation": [("Rotation",)], "thin_film_thickness": [("Thin Film Thickness",)],
+                 "thin_film_ior": [("Thin Film IOR",)]},
+    "glass": {"color": [("Color",)], "roughness": [("Roughness",)], "ior": [("IOR",)],
+              "thin_film_thickness": [("Thin Film Thickness",)],
+              "thin_film_ior": [("Thin Film IOR",)]},
+    "refraction": {"color": [("Color",)], "roughness": [("Roughness",)], "ior": [("IOR",)]},
+    "transparent": {"color": [("Color",)]},
+    "translucent": {"color": [("Color",)]},
+    "sheen": {"color": [("Color",)], "roughness": [("Roughness",)]},
+}
+_COORDINATE_KEYS = ("uv", "position", "normal", "generated")
 
-    def __init__(self, owner: str, warn: _Warnings):
+
+class _CoordinateRecorder(dict):
+    """Per-hit inputs for a trial evaluation of a node graph at one point: answers every
+    coordinate ``Scene.corner_attributes`` can hold with zeros and records which were read."""
+
+    def __init__(self):
+        super().__init__()
+        self.asked: set = set()
+
+    def __contains__(self, key) -> bool:
+        return isinstance(key, str) and key.split(":", 1)[0] in _COORDINATE_KEYS
+
+    def __getitem__(self, key):
+        if key not in self:
+            raise KeyError(key)
+        self.asked.add(key)
+        return np.zeros((1, 2) if key.startswith("uv") else (1, 3))
+
+
+class _NodeReader:
+    """Evaluates a material's (or world's) shader nodes into constant radiometric values; with
+    a material's ``tree``, inputs driven by nodes the evaluator supports are kept per-hit
+    (``driven``; :meth:`attach_textures`)."""
+
+    def __init__(self, owner: str, warn: _Warnings, tree=None, images: dict | None = None):
         self.owner = owner      # e.g. "Material 'Wood'"
         self.warn = warn
+        self.tree = tree
+        self.images = {} if images is None else images
+        self.graph = None       # the tree as ``nodes.Graph``, read when first needed
+        # (node name, socket names) -> (graph socket, the socket's own value, label) for
+        # inputs driven by supported nodes; ``values``: every constant read, same keys.
+        self.driven: dict = {}
+        self.values: dict = {}
+        self.coordinates: set = set()     # per-corner coordinates the graphs read
+
+    def _graph_socket(self, src_node, out):
+        """(node name, output identifier) when the evaluator supports the nodes feeding this
+        output (a trial evaluation), else None with the reason."""
+        if self.graph is None:
+            self.graph = export_graph(self.tree, self.warn, self.images)
+        socket = (src_node.name, out.identifier)
+        recorder = _CoordinateRecorder()
+        try:
+            nodes.evaluate(self.graph, socket, recorder, n=1)
+        except nodes.UnsupportedNode as error:
+            return None, str(error)
+        except (nodes.MissingInput, KeyError) as error:
+            return None, f"a coordinate that is not exported ({error})"
+        self.coordinates |= recorder.asked
+        return socket, ""
+
+    def attach_textures(self, closure: Closure, node) -> Closure:
+        """``closure`` with ``textures`` for each of its parameters whose sockets are driven
+        (``_PARAM_SOCKETS``); those entries leave ``driven``."""
+        for param, sockets in _PARAM_SOCKETS.get(closure.kind, {}).items():
+            keys = [(node.name, names) for names in sockets]
+            if not any(k in self.driven for k in keys):
+                continue
+            factors = []
+            for k in keys:
+                if k in self.driven:
+                    factors.append((self.driven.pop(k)[0], None))
+                else:
+                    factors.append((None, self.values.get(k, 1.0)))
+            closure.textures[param] = factors
+        return closure
 
     # Links ---------------------------------------------------------------------------------
     def source(self, socket):
@@ -338,12 +501,22 @@ class _NodeReader:
         if sock is None:
             return convert(default)
         value = convert(sock.default_value) if hasattr(sock, "default_value") else convert(default)
+        self.values[(node.name, tuple(names))] = value
         src = self.source(sock)
         if src is None:
             return value
         src_node, out = src
         if src_node.type in ("RGB", "VALUE") and hasattr(out, "default_value"):
             return convert(out.default_value)
+        if self.tree is not None:
+            socket, reason = self._graph_socket(src_node, out)
+            if socket is not None:
+                self.driven[(node.name, tuple(names))] = (socket, value, sock.name)
+                self.values[(node.name, tuple(names))] = value
+                return value
+            self.warn(f"{self.owner}: {sock.name} of '{node.name}' is driven by nodes Lanterna "
+                      f"cannot evaluate ({reason}); using its default {what} {_fmt(value)}")
+            return value
         self._linked_warning(node, sock, src_node, what, value)
         return value
 
@@ -397,8 +570,8 @@ class _NodeReader:
         }
         for vector in ("Normal", "Coat Normal", "Tangent"):
             self.check_normal(node, vector)
-        return Closure("principled", params=params, node=node.name,
-                       distribution=getattr(node, "distribution", ""))
+        return self.attach_textures(Closure("principled", params=params, node=node.name,
+                                            distribution=getattr(node, "distribution", "")), node)
 
     def _microfacet(self, node, kind: str) -> Closure:
         c, x = self.colour, self.scalar
@@ -423,8 +596,8 @@ class _NodeReader:
             params["thin_film_ior"] = x(node, "Thin Film IOR", default=1.33)
         for vector in ("Normal", "Tangent"):
             self.check_normal(node, vector)
-        return Closure(kind, params=params, node=node.name,
-                       distribution=getattr(node, "distribution", ""))
+        return self.attach_textures(Closure(kind, params=params, node=node.name,
+                                            distribution=getattr(node, "distribution", "")), node)
 
     def closures(self, src, depth: int = 0) -> list:
         """The weighted closures of the shader feeding a socket, as Cycles flattens a shader
@@ -447,14 +620,15 @@ class _NodeReader:
             return [self._principled(node)]
         if t == "BSDF_DIFFUSE":
             self.check_normal(node)
-            return [Closure("diffuse", params={
+            return [self.attach_textures(Closure("diffuse", params={
                 "color": self.colour(node, "Color", default=(0.8, 0.8, 0.8)),
                 "roughness": float(np.clip(self.scalar(node, "Roughness"), 0, 1))},
-                node=node.name)]
+                node=node.name), node)]
         if t == "EMISSION":
-            return [Closure("emission", params={
+            return [self.attach_textures(Closure("emission", params={
                 "radiance": (self.colour(node, "Color", default=(1, 1, 1))
-                             * self.scalar(node, "Strength", default=1.0))}, node=node.name)]
+                             * self.scalar(node, "Strength", default=1.0))}, node=node.name),
+                node)]
         kinds = {"BSDF_GLOSSY": "glossy", "BSDF_ANISOTROPIC": "glossy",
                  "BSDF_METALLIC": "metallic", "BSDF_GLASS": "glass",
                  "BSDF_REFRACTION": "refraction"}
@@ -477,7 +651,7 @@ class _NodeReader:
                                                     0, 1))
             if kind != "transparent":
                 self.check_normal(node)
-            return [Closure(kind, params=params, node=node.name)]
+            return [self.attach_textures(Closure(kind, params=params, node=node.name), node)]
         if t == "HOLDOUT":
             return [Closure("holdout", node=node.name)]
 
@@ -521,7 +695,22 @@ def _clamp_reflectances(name: str, diffuse, specular, exitance, warn: _Warnings)
     return diffuse, specular, exitance
 
 
-def _convert_material(mat, warn: _Warnings) -> Material:
+def _coordinates_read(materials) -> set:
+    """The per-corner coordinates (``Scene.corner_attributes`` keys) the node-driven inputs of
+    ``materials`` read, by a trial evaluation of each at one point."""
+    keys: set = set()
+    for material in materials:
+        for closure in material.closures:
+            for factors in closure.textures.values():
+                for socket, _constant in factors:
+                    if socket is not None:
+                        recorder = _CoordinateRecorder()
+                        nodes.evaluate(material.graph, tuple(socket), recorder, n=1)
+                        keys |= recorder.asked
+    return keys
+
+
+def _convert_material(mat, warn: _Warnings, images: dict | None = None) -> Material:
     """A Blender material -> :class:`Material` (see the module docstring)."""
     name = mat.name
     props = getattr(mat, "lanterna", None)
@@ -531,15 +720,16 @@ def _convert_material(mat, warn: _Warnings) -> Material:
         e = getattr(props, "exitance", (0.0, 0.0, 0.0))
         d, s, e = _clamp_reflectances(name, d[:3], s[:3], e[:3], warn)
         return Material(name, diffuse=d, specular=s, exitance=e)
-    return material_from_nodes(mat, warn)
+    return material_from_nodes(mat, warn, images)
 
 
-def material_from_nodes(mat, warn=None) -> Material:
+def material_from_nodes(mat, warn=None, images: dict | None = None) -> Material:
     """The :class:`Material` derived from ``mat``'s node tree (or its viewport colour when it
     has none), whatever its ``derive_from_nodes`` says: the rules of the module docstring,
     clamped as the render clamps them. ``warn`` (a callable taking a message; default: the
-    messages are dropped) receives what the derivation had to approximate. The Material
-    panel shows these values read-only."""
+    messages are dropped) receives what the derivation had to approximate; ``images`` (name
+    -> ``nodes.Image``) is shared between materials so each image is read once. The Material
+    panel shows these values read-only (node-driven inputs at their sockets' own values)."""
     warn = warn if warn is not None else _Warnings()
     name = mat.name
     tree = mat.node_tree
@@ -548,7 +738,7 @@ def material_from_nodes(mat, warn=None) -> Material:
         d, s, e = _clamp_reflectances(name, mat.diffuse_color[:3], (0, 0, 0), (0, 0, 0), warn)
         return Material(name, diffuse=d, specular=s, exitance=e)
 
-    reader = _NodeReader(f"Material '{name}'", warn)
+    reader = _NodeReader(f"Material '{name}'", warn, tree, images)
     out = _active_output(tree, "OUTPUT_MATERIAL")
     if out is None:
         warn(f"Material '{name}' has no Material Output node; rendered black")
@@ -559,11 +749,19 @@ def material_from_nodes(mat, warn=None) -> Material:
              f"rendered black")
         return Material(name, diffuse=np.zeros(3))
     closures = reader.closures(src)
+    # Driven inputs no closure parameter took (a Mix Shader's Fac ...): their defaults.
+    for (node_name, _names), (_socket, value, socket_name) in reader.driven.items():
+        warn(f"{reader.owner}: {socket_name} of '{node_name}' is driven by nodes; Lanterna "
+             f"takes no per-hit value there and uses its default {_fmt(value)}")
     seed = seed_reduction(closures)
     for note in seed.notes:
         warn(f"{reader.owner}: {note}")
+    for note in textures.approximations(closures):
+        warn(f"{reader.owner}: {note}")
     d, s, e = _clamp_reflectances(name, seed.diffuse, seed.specular, seed.exitance, warn)
-    return Material(name, diffuse=d, specular=s, exitance=e, closures=tuple(closures))
+    textured = any(c.textures for c in closures)
+    return Material(name, diffuse=d, specular=s, exitance=e, closures=tuple(closures),
+                    graph=reader.graph if textured else None)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -838,6 +1036,7 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
     camera = _export_camera(depsgraph, scene, resolution, border, warn)
 
     materials: list[Material] = []
+    images: dict = {}                       # image name -> nodes.Image, read once
     material_index: dict[int, int] = {}     # Blender material pointer -> index
     default_id: list[int] = []              # index of the default grey, created on demand
 
@@ -850,7 +1049,7 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
         key = getattr(mat, "original", mat).as_pointer()
         if key not in material_index:
             material_index[key] = len(materials)
-            materials.append(_convert_material(mat, warn))
+            materials.append(_convert_material(mat, warn, images))
         return material_index[key]
 
     object_names: list[str] = []
@@ -984,11 +1183,22 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
             object_ids[start:end] = np.repeat(group.object_ids[c0:c0 + step], n_tri)
             start = end
 
+    corner_attributes = {key: np.zeros((total, 3, 2 if key.startswith("uv") else 3),
+                                       np.float32)
+                         for key in sorted(_coordinates_read(materials))}
+    start = 0
+    for group in groups.values():
+        n_tri, n = group.data.count, len(group.matrices)
+        for key, out_array in corner_attributes.items():
+            out_array[start:start + n * n_tri].reshape(n, n_tri, 3, -1)[:] = \
+                _corner_attribute(group.data, key)
+        start += n * n_tri
+
     world = _export_world(scene_eval.world, warn)
     out = Scene(triangles=triangles, material_ids=material_ids, materials=materials,
                 camera=camera, shading_normals=normals, object_ids=object_ids,
                 object_names=object_names, lights=lights, world=world,
-                warnings=list(warn.messages))
+                warnings=list(warn.messages), corner_attributes=corner_attributes)
     out.validate()
     out.warnings = list(dict.fromkeys(out.warnings))
     out.stats.update({

@@ -10,7 +10,8 @@ Run from the repository root with the project's virtualenv (bpy 5.2.3, Cycles CP
     (renders seeds 5-8 at the stored spp and merges them into the stored reference: the
     per-pixel sums come back exactly from ``image`` and ``pixel_var``)
 
-Every scene of ``MATERIAL_SCENES`` is rendered by Cycles on the CPU with the settings of
+Every scene of ``MATERIAL_SCENES`` (and of ``tests/texture_scenes.py``'s ``TEXTURE_SCENES``:
+``textured_room``, ``plain_room``) is rendered by Cycles on the CPU with the settings of
 ``make_cycles_refs.py --gi`` (its ``configure_cycles(gi=True)``): 64 diffuse, glossy and
 transmission bounces, caustics reflective and refractive on, no glossy blur, no denoiser, no
 adaptive sampling, no clamping, light threshold 0, Blackman-Harris 1.5 px, path guiding off,
@@ -61,6 +62,12 @@ import bpy  # noqa: E402
 
 import make_cycles_refs as mcr  # noqa: E402
 import material_scenes as ms  # noqa: E402
+import texture_scenes as ts  # noqa: E402
+
+# Every scene this script renders: the material scenes (issue 23) and the texture scenes
+# (issue 24, ``tests/texture_scenes.py``), name -> (builder module, builder).
+SCENES = {**{n: (ms, f) for n, f in ms.MATERIAL_SCENES.items()},
+          **{n: (ts, f) for n, f in ts.TEXTURE_SCENES.items()}}
 
 OUT = HERE / "cycles_materials"
 GRID = (4, 4)
@@ -71,6 +78,8 @@ SAMPLES = {              # per seed: every bright block's relative SE < 0.3 % (R
     "metal_sphere": 1536,
     "mix_floor": 1024,
     "glass_caustic": 12288,
+    "textured_room": 1024,
+    "plain_room": 1024,
 }
 SCENE_SEEDS = {          # where 4 seeds left a block at >= 0.3 % (the stored references)
     "metal_sphere": (1, 2, 3, 4, 5, 6, 7, 8),      # 0.33 % with 4
@@ -126,7 +135,7 @@ def make_reference(name: str, tmpdir: str, out: Path, samples: int | None = None
     prev = _previous(out / f"{name}.npz", spp, seeds) if add else None
     renders, seconds, settings = [], [], None
     for seed in seeds:
-        scene = ms.build(name)
+        scene = SCENES[name][0].build(name)
         inside = [n for n in ms._ps.lights_out_of_frame(scene) if scene.objects[n].visible_camera]
         if inside:
             raise RuntimeError(f"{name}: visible lights inside the camera frame: {inside}")
@@ -159,7 +168,7 @@ def make_reference(name: str, tmpdir: str, out: Path, samples: int | None = None
     region_se_pixels = np.sqrt(mcr.block_means(pixel_var, GRID)) / math.sqrt(npix)
     settings = dict(settings, seeds=list(seeds), seed="see seeds", blender=bpy.app.version_string,
                     render_seconds=[round(s, 2) for s in seconds], grid=list(GRID), scene=name,
-                    builder=f"tests/material_scenes.py:{ms.MATERIAL_SCENES[name].__name__}")
+                    builder=f"tests/{SCENES[name][0].__name__}.py:{SCENES[name][1].__name__}")
     extra = {}
     if caustic is not None:
         x0, x1, y0, y1 = ms.CAUSTIC_REGION
@@ -223,7 +232,7 @@ def make_reference(name: str, tmpdir: str, out: Path, samples: int | None = None
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("scenes", nargs="*", help=f"of {list(ms.MATERIAL_SCENES)}")
+    parser.add_argument("scenes", nargs="*", help=f"of {list(SCENES)}")
     parser.add_argument("--samples", type=int, help="samples per seed (trials)")
     parser.add_argument("--seeds", type=int, nargs="+",
                         help="seeds (default: SCENE_SEEDS or SEEDS)")
@@ -232,10 +241,10 @@ def main():
     parser.add_argument("--add-seeds", action="store_true",
                         help="merge the renders of --seeds into the references already there")
     args = parser.parse_args()
-    names = args.scenes or list(ms.MATERIAL_SCENES)
-    unknown = [n for n in names if n not in ms.MATERIAL_SCENES]
+    names = args.scenes or list(SCENES)
+    unknown = [n for n in names if n not in SCENES]
     if unknown:
-        parser.error(f"unknown scenes {unknown}; known: {list(ms.MATERIAL_SCENES)}")
+        parser.error(f"unknown scenes {unknown}; known: {list(SCENES)}")
     args.out.mkdir(parents=True, exist_ok=True)
     manifest_path = args.out / "manifest.json"
     manifest = json.loads(manifest_path.read_text()) if manifest_path.exists() else {}

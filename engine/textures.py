@@ -1,0 +1,224 @@
+"""Textured materials: the per-hit values of shader inputs that nodes drive, and the seed's
+material (rho_d, rho_s, M) they make at each hit.
+
+What it computes
+----------------
+A Blender material drives shader inputs (Base Color, Emission Color, Roughness ...) with node
+trees. Export (``engine/blender/export.py``) records each such input on its closure
+(``shaders.Closure.textures``: parameter -> factors whose product is its value), keeps the
+material's node graph (``scene.Material.graph``, an ``engine.nodes.Graph``) and puts on the
+scene the per-corner coordinates the graphs read (``Scene.corner_attributes``: ``"uv"`` the
+active render UV map (T, 3, 2), ``"uv:<name>"`` each UV map by name, ``"position"`` and
+``"normal"`` object space (T, 3, 3), ``"generated"`` the mesh's texture-space coordinate
+(T, 3, 3); float32). At a hit these are interpolated with the hit's barycentrics (corner
+weights 1 - u - v, u, v, as ``surfaces.SceneSurfaces.normals`` uses them) and handed to
+``nodes.evaluate``.
+
+:class:`MaterialTextures` (one per ``bsdf.MaterialTable``):
+
+``textured`` (M,) bool
+    materials with at least one node-driven input.
+``mean_closures[m]``
+    the material's closures with each node-driven input replaced by its mean over the
+    material's surface (``MEAN_SAMPLES`` area-uniform points, a fixed seed): what the
+    per-material tables (the planner, roulette shares) and the glossy and glass lobes use.
+``reduction(material_id, prim, bu, bv)`` -> (diffuse, specular, exitance) (k, 3) float64
+    the seed's rho_d, rho_s and M (``shaders.seed_reduction``) at hits on triangles ``prim``
+    of one material, clipped as export clips a material (negative values to 0, rho_d + rho_s
+    scaled down to 1 where it exceeds 1).
+
+What follows the texture at each hit, and what takes its mean
+    The diffuse reflectance (camera shading, the photons' stored power and roulette, gather
+    rays, the cache's records: all read ``bsdf.SurfaceParams.diffuse`` at their own hit), the
+    specular share of the roulette and the exitance seen by rays follow the texture exactly.
+    The glossy and glass lobes (their roughness, Fresnel, tints) use the mean of their
+    node-driven inputs, and emissive meshes are sampled as lights by their mean exitance;
+    export names every such input in a warning (:func:`approximations`).
+
+Conversions follow Cycles: a colour feeding a number by its luminance (``nodes.LUMA``), a
+vector by the mean of its components, a number feeding a colour on all three channels.
+Numbers are clipped to the ranges export clips the socket values to (``PARAM_RANGES``).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from . import nodes
+from .shaders import CLOSURE_KINDS, seed_reduction
+
+__all__ = ["MaterialTextures", "approximations", "interpolate_corners", "MEAN_SAMPLES",
+           "PARAM_RANGES", "EXACT_PARAMS"]
+
+# Area-uniform points per textured material for the means the lobes use.
+MEAN_SAMPLES = 4096
+# Parameter -> (low, high) as export clips the socket values (None: no bound).
+PARAM_RANGES = {
+    "metallic": (0.0, 1.0), "roughness": (0.0, 1.0), "alpha": (0.0, 1.0),
+    "diffuse_roughness": (0.0, 1.0), "subsurface_weight": (0.0, 1.0),
+    "anisotropic": (0.0, 1.0), "transmission": (0.0, 1.0), "coat_roughness": (0.0, 1.0),
+    "sheen_roughness": (0.0, 1.0), "specular_ior_level": (0.0, None),
+    "coat_weight": (0.0, None), "sheen_weight": (0.0, None),
+    "thin_film_thickness": (0.0, None), "anisotropy": (-1.0, 1.0),
+}
+# (closure kind, parameter) pairs whose per-hit value is rendered exactly (see the module
+# docstring); the others' lobes take their mean.
+EXACT_PARAMS = {("principled", "base_color"), ("principled", "metallic"),
+                ("principled", "transmission"), ("principled", "emission"),
+                ("principled", "subsurface_weight"),
+                ("diffuse", "color"), ("translucent", "color"), ("sheen", "color"),
+                ("emission", "radiance")}
+
+
+def interpolate_corners(corner: np.ndarray, prim, bu, bv) -> np.ndarray:
+    """(N, k) float64: a (T, 3, k) per-corner attribute at hits on triangles ``prim`` with
+    barycentrics (bu, bv)."""
+    c = np.take(corner, prim, axis=0).astype(np.float64)
+    u = np.asarray(bu, np.float64)[:, None]
+    v = np.asarray(bv, np.float64)[:, None]
+    return c[:, 0] * (1.0 - u - v) + c[:, 1] * u + c[:, 2] * v
+
+
+def _as_param(value: np.ndarray, kind_default, graph, socket) -> np.ndarray:
+    """A node output (N,) or (N, 3) as a parameter of the default's shape (Cycles' implicit
+    conversions: colour -> number by luminance, vector -> number by the mean)."""
+    value = np.asarray(value, np.float64)
+    if isinstance(kind_default, tuple):
+        return np.repeat(value[:, None], 3, axis=1) if value.ndim == 1 else value
+    if value.ndim == 2:
+        out_kind = graph.nodes[socket[0]].outputs.get(socket[1], "VALUE")
+        return value @ nodes.LUMA if out_kind == "RGBA" else value.mean(axis=1)
+    return value
+
+
+def _clip(param: str, value):
+    low, high = PARAM_RANGES.get(param, (None, None))
+    if low is None and high is None:
+        return value
+    return np.clip(value, low, high)
+
+
+def param_at(graph, kind: str, param: str, factors, inputs: dict, n: int) -> np.ndarray:
+    """The per-hit value (N,) or (N, 3) of one node-driven parameter: the product of its
+    factors, each a node output or a constant."""
+    default = CLOSURE_KINDS[kind][param]
+    value = None
+    for socket, constant in factors:
+        if socket is None:
+            part = np.asarray(constant, np.float64)
+        else:
+            part = _as_param(nodes.evaluate(graph, tuple(socket), inputs, n), default, graph,
+                             socket)
+        value = part if value is None else value * part
+    if isinstance(default, tuple):
+        value = np.broadcast_to(value, (n, 3))
+    else:
+        value = np.broadcast_to(value, (n,))
+    return _clip(param, np.array(value, np.float64))
+
+
+def approximations(closures) -> list[str]:
+    """What a material's node-driven inputs lose (one message each, naming the node and the
+    input): inputs of glossy and glass lobes take their mean over the surface."""
+    out = []
+    for c in closures:
+        for param in c.textures:
+            if (c.kind, param) in EXACT_PARAMS:
+                continue
+            if c.kind == "principled" and param == "base_color":
+                continue
+            out.append(f"{param.replace('_', ' ').title()} of '{c.node}' is driven by nodes; "
+                       "its glossy and glass lobes use its mean over the surface (per-hit "
+                       "values reach the diffuse, the emission and the roulette only)")
+        if c.kind == "principled" and "base_color" in c.textures and (
+                np.any(np.asarray(c.params["metallic"]) > 0)
+                or np.any(np.asarray(c.params["transmission"]) > 0) or "metallic" in c.textures
+                or "transmission" in c.textures):
+            out.append(f"Base Color of '{c.node}' is driven by nodes; its metal and "
+                       "transmission lobes use its mean over the surface (the diffuse follows "
+                       "the texture per hit)")
+    return out
+
+
+class MaterialTextures:
+    """The node-driven inputs of a scene's materials (module docstring)."""
+
+    def __init__(self, scene):
+        self.scene = scene
+        self.corners = dict(getattr(scene, "corner_attributes", None) or {})
+        self.graphs = [getattr(m, "graph", None) for m in scene.materials]
+        self.textured = np.array([g is not None and any(c.textures for c in m.closures)
+                                  for m, g in zip(scene.materials, self.graphs)], bool)
+        self.any = bool(self.textured.any())
+        self.mean_closures = [tuple(m.closures) for m in scene.materials]
+        self.mean_reduction = {}
+        for material_id in np.flatnonzero(self.textured):
+            self._means(int(material_id))
+
+    def inputs(self, prim, bu, bv) -> dict:
+        """The per-hit coordinates ``nodes.evaluate`` reads, at hits (prim, bu, bv)."""
+        return {key: interpolate_corners(corner, prim, bu, bv)
+                for key, corner in self.corners.items()}
+
+    def closures_at(self, material_id: int, prim, bu, bv) -> list:
+        """The material's closures with per-hit parameters at hits (prim, bu, bv)."""
+        n = len(prim)
+        graph = self.graphs[material_id]
+        inputs = self.inputs(prim, bu, bv)
+        out = []
+        for c in self.scene.materials[material_id].closures:
+            if not c.textures:
+                out.append(c)
+                continue
+            params = dict(c.params)
+            for param, factors in c.textures.items():
+                params[param] = param_at(graph, c.kind, param, factors, inputs, n)
+            out.append(c.at_hits(params))
+        return out
+
+    def reduction(self, material_id: int, prim, bu, bv):
+        """(diffuse, specular, exitance) (k, 3) at hits on triangles ``prim`` of material
+        ``material_id`` with barycentrics (bu, bv), clipped as export clips materials."""
+        n = len(prim)
+        seed = seed_reduction(self.closures_at(material_id, prim, bu, bv))
+        diffuse, specular, exitance = (np.maximum(np.broadcast_to(x, (n, 3)), 0.0)
+                                       for x in (seed.diffuse, seed.specular, seed.exitance))
+        total = (diffuse + specular).max(axis=1, keepdims=True)
+        scale = 1.0 / np.maximum(total, 1.0)
+        return diffuse * scale, specular * scale, np.array(exitance)
+
+    def _means(self, material_id: int) -> None:
+        """Fill ``mean_closures`` and ``mean_reduction`` of one textured material from
+        ``MEAN_SAMPLES`` area-uniform points on its triangles."""
+        scene = self.scene
+        tris = np.flatnonzero(scene.material_ids == material_id)
+        material = scene.materials[material_id]
+        if len(tris) == 0:
+            return
+        t = scene.triangles[tris].astype(np.float64)
+        area = 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
+        rng = np.random.default_rng(0)
+        cdf = np.cumsum(area)
+        pick = np.minimum(np.searchsorted(cdf, rng.random(MEAN_SAMPLES) * cdf[-1],
+                                          side="right"), len(tris) - 1)
+        su = np.sqrt(rng.random(MEAN_SAMPLES))
+        v = rng.random(MEAN_SAMPLES)
+        bu, bv = su * (1.0 - v), su * v            # area-uniform barycentrics
+        prim = tris[pick]
+        closures = self.closures_at(material_id, prim, bu, bv)
+        means = []
+        for c, original in zip(closures, material.closures):
+            if not original.textures:
+                means.append(original)
+                continue
+            params = dict(original.params)
+            for param in original.textures:
+                value = np.mean(c.params[param], axis=0)
+                params[param] = tuple(float(x) for x in value) if np.ndim(value) else \
+                    float(value)
+            mean = original.scaled(1.0)
+            mean.params = {k: (np.asarray(v, np.float64) if isinstance(v, tuple) else v)
+                           for k, v in params.items()}
+            means.append(mean)
+        self.mean_closures[material_id] = tuple(means)
+        d, s, e = self.reduction(material_id, prim, bu, bv)
+        self.mean_reduction[material_id] = (d.mean(axis=0), s.mean(axis=0), e.mean(axis=0))

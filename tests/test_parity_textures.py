@@ -1,0 +1,72 @@
+"""Texture parity with Cycles (issue 24): Lanterna's ``final`` preset against the all-bounce
+Cycles references of ``tests/data/make_material_refs.py`` for ``tests/texture_scenes.py``.
+
+* ``textured_room`` (image-textured Principled floor and back wall, an emission panel whose
+  Emission Color is an image): every bright 4 x 4 region's mean luminance within the issue's
+  2 % of Cycles'. Measured, seed 1: worst region 1.45 % (image 0.994).
+* Sharpness (open, a strict xfail: 3.79 % textured, 3.26 % plain at seed 1): the floor's
+  per-pixel rel-RMSE against Cycles (``FLOOR_ROWS``: the bottom rows,
+  floor only) on the textured room is no worse than on ``plain_room``, whose floor is the
+  image's mean colour: the cache and the photon map hold irradiance, and each pixel
+  multiplies it by the albedo at its own hit.
+
+The references' own noise: relative SE at most 0.40 % (textured) and 0.34 % (plain) a region
+(their manifest).
+"""
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+import texture_scenes  # noqa: E402
+from test_parity_cycles import block_means  # noqa: E402
+
+pytestmark = pytest.mark.parity
+
+REF_DIR = HERE / "data" / "cycles_materials"
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+FLOOR_ROWS = slice(50, 60)        # of 60, row 0 = top: below the cube, floor only
+_RENDERS: dict = {}
+
+
+def _render(name, seed=1):
+    if (name, seed) not in _RENDERS:
+        from lanterna.engine.blender.export import export_scene
+        from lanterna.engine.pipeline import RenderSettings, render
+
+        texture_scenes.build(name)
+        scene = export_scene(bpy.context.evaluated_depsgraph_get())
+        image = np.asarray(render(scene, RenderSettings(seed=seed, preset="final")).image,
+                           np.float64)
+        assert np.all(np.isfinite(image))
+        _RENDERS[(name, seed)] = image
+    return _RENDERS[(name, seed)], np.load(REF_DIR / f"{name}.npz")
+
+
+def test_textured_room_within_2_percent():
+    image, ref = _render("textured_room")
+    grid = tuple(int(v) for v in ref["grid"])
+    ours = block_means(image, grid) @ LUMINANCE
+    theirs = ref["region_mean"] @ LUMINANCE
+    bright = theirs > 0.1 * theirs.max()
+    worst = float(np.abs(ours[bright] / theirs[bright] - 1).max())
+    assert worst <= 0.02, worst
+
+
+def _floor_rel_rmse(name):
+    image, ref = _render(name)
+    ours, theirs = image[FLOOR_ROWS] @ LUMINANCE, ref["image"][FLOOR_ROWS] @ LUMINANCE
+    return float(np.sqrt(np.mean((ours - theirs) ** 2)) / np.sqrt(np.mean(theirs ** 2)))
+
+
+@pytest.mark.xfail(strict=True, reason="issue 24 open: seed 1, the textured floor's rel-RMSE is "
+                   "3.79 % against the plain floor's 3.26 % (pixels across tile edges; not yet "
+                   "split into camera sampling and shading noise)")
+def test_textured_floor_is_as_sharp_as_a_plain_one():
+    textured, plain = _floor_rel_rmse("textured_room"), _floor_rel_rmse("plain_room")
+    assert textured <= plain, (textured, plain)
