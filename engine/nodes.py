@@ -14,8 +14,29 @@ Per-hit inputs (``inputs``, arrays over the N hits, float; all optional until a 
     object-space position (Texture Coordinate > Object); ``"normal"`` (N, 3) object-space
     shading normal; ``"generated"`` (N, 3) the Generated coordinate (object space mapped
     through the mesh's texture space, Blender's orco); ``"color:<name>"`` (N, 3) and
-    ``"alpha:<name>"`` (N,) vertex colours (``"color"``/``"alpha"`` for the active one). A node
-    that needs an input that is not given raises :class:`MissingInput`.
+    ``"alpha:<name>"`` (N,) vertex colours (``"color"``/``"alpha"`` for the active one).
+    World space (Geometry, Fresnel, Layer Weight, Normal Map, Bump): ``"position_world"``
+    (N, 3) [m]; ``"normal_world"`` (N, 3) the unit shading normal, already turned to the side
+    the ray came from (Cycles' sd->N); ``"true_normal_world"`` (N, 3) the geometric normal, so
+    turned too; ``"incoming"`` (N, 3) the unit vector from the hit towards where the ray came
+    from (the viewer for camera rays; Cycles' sd->wi); ``"backfacing"`` (N,) 1 where the ray
+    hit the back of the face, else 0. ``"attr:<name>"`` a geometry attribute, (N,), (N, 2),
+    (N, 3) or (N, 4) (Attribute also finds ``"uv:<name>"`` and ``"color:<name>"``).
+    ``"tangent:<uvmap>"`` (N, 4) (``"tangent"`` for the active UV map): the interpolated,
+    unnormalised object-space MikkTSpace tangent and, in the last column, the bitangent sign;
+    ``"normal_matrix"`` (N, 3, 3) object-to-world matrix for normals (inverse transpose of the
+    object's linear part), for the Normal Map's tangent and object spaces. ``"ray:<output>"``
+    (N,) a Light Path output; a missing flag or depth is a camera ray's (Is Camera Ray 1, the
+    rest 0, as Cycles' path flags at a camera hit), Ray Length has no default. Lanterna's
+    meaning: camera rays and camera paths continuing through glossy/specular lobes give what
+    Cycles gives; photons are light paths and should be shaded as Cycles shades the emission
+    side of a light path: Is Camera Ray 0, Is Diffuse/Glossy/Transmission Ray from the last
+    bounce, Ray Depth the bounce count, Ray Length the segment length; final-gather rays are
+    one diffuse reflection bounce (Is Diffuse Ray 1, Is Reflection Ray 1, Ray Depth 1, Diffuse
+    Depth 1, Ray Length the gather ray's length). ``"dPdx"``, ``"dPdy"`` (N, 3) [m] the hit's
+    footprint (ray differentials) and ``"dx:<key>"``, ``"dy:<key>"`` the change of input <key>
+    across it, for Bump. A node that needs an input that is not given raises
+    :class:`MissingInput`.
 
 Images (``Graph.images``: name -> :class:`Image`)
     ``pixels`` (H, W, 4) float32, row 0 at the bottom and pixel centres at ((i + 0.5) / W,
@@ -34,7 +55,25 @@ Nodes (Blender 5.2 LTS; formulas follow Cycles' SVM kernel, ``intern/cycles/kern
     cardinal, B-spline; RGB, HSV and HSL blending; through Cycles' 257-entry table), Checker,
     Gradient (all 7 types), Texture Coordinate (Generated, Normal, UV, Object), UV Map, Color
     Attribute, Mapping (point, texture, vector, normal), Image Texture (flat projection; closest,
-    linear, cubic B-spline, Smart as cubic; repeat, extend, clip, mirror; alpha straight).
+    linear, cubic B-spline, Smart as cubic; repeat, extend, clip, mirror; alpha straight);
+    Noise Texture (1D-4D; fBM, multifractal, hybrid and ridged multifractal, hetero terrain;
+    fractional detail, distortion, normalize; Fac and Color), Voronoi Texture (1D-4D; F1, F2,
+    smooth F1, distance to edge, n-sphere radius; Euclidean, Manhattan, Chebychev, Minkowski;
+    fractal detail; Distance, Color, Position, W, Radius), Wave Texture (bands and rings in
+    every direction; sine, saw, triangle; distortion) through ``engine/procedural.py``;
+    Fresnel, Layer Weight, Geometry (Position, Normal, True Normal, Incoming, Backfacing),
+    Attribute (geometry attributes), Light Path (every output); RGB Curves, Vector Curves and
+    Float Curve (Cycles' 257-entry table, which ``node_export.curve_table`` builds with
+    Blender's own curve evaluation, and its lookup with extrapolation); Normal Map (tangent,
+    object, world and Blender's object/world spaces; strength; OpenGL/DirectX; "base" is
+    ignored: there is no displacement); Bump (Strength, Distance, Filter Width, Invert, Height,
+    Normal). Bump is Cycles' formula, N' = normalize(fw |det| N - s sign(det) grad) with the
+    height evaluated three times, at the hit and with every per-hit input k moved by
+    fw * dx:k and fw * dy:k (Cycles moves P by fw dP along its ray differentials); it needs
+    "dPdx"/"dPdy". Cycles' compact differentials make its footprint a scalar spread along an
+    orthonormal frame around Ng, which this batch version does not reproduce: against Cycles'
+    bakes the normals differ by up to 3e-2 on a noise height (tests/test_nodes.py,
+    KNOWN_MISSES).
     Any other node raises :class:`UnsupportedNode` ("unsupported node <type> '<name>'"), for
     the caller to turn into a warning naming the material and the node.
 
@@ -47,6 +86,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from . import procedural
 
 __all__ = ["Node", "Graph", "Image", "UnsupportedNode", "MissingInput", "evaluate",
            "graph_to_dict", "graph_from_dict", "SUPPORTED", "math_op", "vector_math_op",
@@ -612,7 +653,10 @@ SUPPORTED = frozenset({
     "ShaderNodeCombineColor", "ShaderNodeSeparateXYZ", "ShaderNodeCombineXYZ",
     "ShaderNodeValToRGB", "ShaderNodeTexChecker", "ShaderNodeTexGradient",
     "ShaderNodeTexCoord", "ShaderNodeUVMap", "ShaderNodeVertexColor", "ShaderNodeMapping",
-    "ShaderNodeTexImage"})
+    "ShaderNodeTexImage", "ShaderNodeTexNoise", "ShaderNodeTexVoronoi", "ShaderNodeTexWave",
+    "ShaderNodeFresnel", "ShaderNodeLayerWeight", "ShaderNodeNewGeometry",
+    "ShaderNodeAttribute", "ShaderNodeLightPath", "ShaderNodeRGBCurve",
+    "ShaderNodeVectorCurve", "ShaderNodeFloatCurve", "ShaderNodeNormalMap", "ShaderNodeBump"})
 
 
 class _Eval:
@@ -640,6 +684,11 @@ class _Eval:
                 self.memo[(name, k)] = v
             if key not in self.memo and node.type == "ShaderNodeTexCoord":
                 self.hit(_TEXCO_KEYS.get(socket, socket.lower()), node)
+            if key not in self.memo and node.type == "ShaderNodeNewGeometry" \
+                    and socket in _GEOMETRY_KEYS:
+                self.hit(_GEOMETRY_KEYS[socket], node)
+            if key not in self.memo and node.type == "ShaderNodeLightPath":
+                self.hit(f"ray:{socket}", node)
             if key not in self.memo:
                 raise UnsupportedNode(node.type, node.name, f"output '{socket}'")
         return self.memo[key]
@@ -667,6 +716,24 @@ class _Eval:
         if want == "VALUE" and v.ndim == 2:
             return v @ LUMA if have == "RGBA" else v.mean(1)
         return np.array(v, float)
+
+    def shifted(self, axis: str, width) -> "_Eval":
+        """An evaluator at the hits moved by ``width`` times the footprint along ``axis``
+        ("x" or "y"): each per-hit input k with a differential "d<axis>:k" becomes
+        k + width * d<axis>:k ("position_world" moves by dP<axis> unless given its own);
+        the others stay (Cycles' bump evaluation at P + dP * filter width)."""
+        w = np.asarray(width, float)
+        moved = dict(self.inputs)
+        for k, v in self.inputs.items():
+            if k.startswith(("dx:", "dy:")) or k in ("dPdx", "dPdy"):
+                continue
+            d = self.inputs.get(f"d{axis}:{k}")
+            if d is None and k == "position_world":
+                d = self.inputs.get(f"dP{axis}")
+            if d is not None:
+                v = np.asarray(v, float)
+                moved[k] = v + (w.reshape(-1, *([1] * (v.ndim - 1))) if w.ndim else w) * d
+        return _Eval(self.g, moved, self.n)
 
     def vector_or(self, node: Node, ident: str, default_key: str):
         """A texture's Vector input, or the per-hit coordinate used when it is unlinked."""
@@ -947,6 +1014,301 @@ def _tex_image(ev, node):
     return {"Color": rgba[:, :3], "Alpha": rgba[:, 3]}
 
 
+# ---------------------------------------------------------------------------------------------
+# Procedural textures (engine/procedural.py), input nodes, curves, normal map, bump
+
+_F32 = np.float32
+
+
+def _tex_points(ev, node, dims: str):
+    """(N, d) float32 texture-space points: Vector and W times Scale, as Cycles forms them."""
+    vec = ev.vector_or(node, "Vector", "generated").astype(_F32)
+    scale = ev.input(node, "Scale", "VALUE").astype(_F32)
+    vec = vec * scale[:, None]
+    if dims == "1D" or dims == "4D":
+        w = ev.input(node, "W", "VALUE").astype(_F32) * scale
+        return w[:, None] if dims == "1D" else np.concatenate([vec, w[:, None]], 1)
+    return vec[:, :2] if dims == "2D" else vec
+
+
+def _tex_noise(ev, node):
+    p = node.props
+    dims = p.get("noise_dimensions", "3D")
+    kind = p.get("noise_type", "FBM")
+    if kind not in procedural.NOISE_TYPES:
+        raise UnsupportedNode(node.type, node.name, f"noise type {kind}")
+    pts = _tex_points(ev, node, dims)
+    args = {k.lower(): ev.input(node, k, "VALUE") for k in ("Detail", "Roughness", "Lacunarity",
+                                                           "Offset", "Gain", "Distortion")}
+    fac, col = procedural.noise_texture(pts, kind, normalize=bool(p.get("normalize", True)),
+                                        **args)
+    return {"Fac": fac.astype(float), "Color": col.astype(float)}
+
+
+def _tex_voronoi(ev, node):
+    p = node.props
+    dims = p.get("voronoi_dimensions", "3D")
+    feature = p.get("feature", "F1")
+    if feature not in procedural.VORONOI_FEATURES:
+        raise UnsupportedNode(node.type, node.name, f"feature {feature}")
+    pts = _tex_points(ev, node, dims)
+    args = {k.lower(): ev.input(node, k, "VALUE") for k in (
+        "Scale", "Detail", "Roughness", "Lacunarity", "Smoothness", "Exponent", "Randomness")}
+    r = procedural.voronoi_texture(pts, feature, p.get("distance", "EUCLIDEAN"),
+                                   normalize=bool(p.get("normalize", False)), **args)
+    n = ev.n
+    out = {"Distance": np.zeros(n), "Color": np.zeros((n, 3)), "Position": np.zeros((n, 3)),
+           "W": np.zeros(n), "Radius": np.zeros(n)}
+    for k in ("Distance", "Radius", "Color"):
+        if k in r:
+            out[k] = r[k].astype(float)
+    if "Position" in r:
+        pos = r["Position"].astype(float)
+        if dims == "1D":
+            out["W"] = pos[:, 0]
+        else:
+            out["Position"][:, :min(3, pos.shape[1])] = pos[:, :3]
+            if dims == "4D":
+                out["W"] = pos[:, 3]
+    return out
+
+
+def _tex_wave(ev, node):
+    p = node.props
+    pts = _tex_points(ev, node, "3D")
+    f = procedural.wave_texture(
+        pts, p.get("wave_type", "BANDS"), p.get("bands_direction", "X"),
+        p.get("rings_direction", "X"), p.get("wave_profile", "SIN"),
+        *(ev.input(node, k, "VALUE") for k in ("Distortion", "Detail", "Detail Scale",
+                                                "Detail Roughness", "Phase Offset")))
+    f = f.astype(float)
+    return {"Fac": f, "Color": np.repeat(f[:, None], 3, 1)}
+
+
+def fresnel_dielectric_cos(cosi, eta):
+    """Unpolarised dielectric Fresnel reflectance for cos(incidence) and relative IOR eta
+    (Cycles' fresnel_dielectric_cos: 1 under total internal reflection)."""
+    c = np.abs(cosi)
+    g = eta * eta - 1.0 + c * c
+    ok = g > 0
+    g = np.sqrt(np.where(ok, g, 1.0))
+    with np.errstate(**_ERR):
+        a = (g - c) / (g + c)
+        b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
+        f = 0.5 * a * a * (1.0 + b * b)
+    return np.where(ok, f, 1.0)
+
+
+def _normal_in(ev, node):
+    """A Normal input when linked, else the shading normal (Cycles' sd->N)."""
+    if (node.name, "Normal") in ev.g.links:
+        return ev.input(node, "Normal", "VECTOR")
+    return ev.hit("normal_world", node)
+
+
+def _backfacing(ev, node):
+    return np.asarray(ev.hit("backfacing", node), float).reshape(ev.n) > 0.5
+
+
+def _fresnel(ev, node):
+    n = _normal_in(ev, node)
+    eta = np.maximum(ev.input(node, "IOR", "VALUE"), 1e-5)
+    eta = np.where(_backfacing(ev, node), 1.0 / eta, eta)
+    return {"Fac": fresnel_dielectric_cos(_dot(ev.hit("incoming", node), n), eta)}
+
+
+def _layer_weight(ev, node):
+    n = _normal_in(ev, node)
+    blend = ev.input(node, "Blend", "VALUE")
+    cos = _dot(ev.hit("incoming", node), n)
+    eta = np.maximum(1.0 - blend, 1e-5)
+    eta = np.where(_backfacing(ev, node), eta, 1.0 / eta)
+    fres = fresnel_dielectric_cos(cos, eta)
+    b = np.clip(blend, 0.0, 1.0 - 1e-5)
+    b = np.where(b < 0.5, 2.0 * b, 0.5 / (1.0 - b))
+    f = np.abs(cos)
+    with np.errstate(**_ERR):
+        facing = 1.0 - np.where(blend != 0.5, np.power(f, b), f)
+    return {"Fresnel": fres, "Facing": facing}
+
+
+_GEOMETRY_KEYS = {"Position": "position_world", "Normal": "normal_world",
+                  "True Normal": "true_normal_world", "Incoming": "incoming",
+                  "Backfacing": "backfacing"}
+
+
+def _geometry(ev, node):
+    out = {}
+    for sock, key in _GEOMETRY_KEYS.items():
+        if key in ev.inputs:
+            v = ev.hit(key, node)
+            out[sock] = v.reshape(ev.n) if sock == "Backfacing" else v
+    return out
+
+
+def _attribute(ev, node):
+    p = node.props
+    if p.get("attribute_type", "GEOMETRY") != "GEOMETRY":
+        raise UnsupportedNode(node.type, node.name,
+                              f"attribute type {p.get('attribute_type')}")
+    name = p.get("attribute_name", "")
+    for key in (f"attr:{name}", f"uv:{name}", f"color:{name}"):
+        if key in ev.inputs:
+            break
+    else:
+        raise MissingInput(f"node {node.type} '{node.name}' needs the per-hit input "
+                           f"'attr:{name}'")
+    a = np.asarray(ev.inputs[key], float)
+    if a.ndim == 1:
+        vec, fac, alpha = np.repeat(a[:, None], 3, 1), a, np.ones(ev.n)
+    elif a.shape[1] == 2:
+        vec = np.concatenate([a, np.zeros((ev.n, 1))], 1)
+        fac, alpha = a[:, 0], np.ones(ev.n)
+    else:
+        vec = a[:, :3]
+        fac = vec.mean(1)
+        alpha = a[:, 3] if a.shape[1] == 4 else np.asarray(
+            ev.inputs.get(f"alpha:{name}", np.ones(ev.n)), float)
+    return {"Color": vec, "Vector": vec, "Fac": fac, "Alpha": alpha}
+
+
+# What a camera ray gives (Cycles' path flags at the first hit: PATH_RAY_CAMERA only)
+LIGHT_PATH_CAMERA = {"Is Camera Ray": 1.0, "Is Shadow Ray": 0.0, "Is Diffuse Ray": 0.0,
+                     "Is Glossy Ray": 0.0, "Is Singular Ray": 0.0, "Is Reflection Ray": 0.0,
+                     "Is Transmission Ray": 0.0, "Is Volume Scatter Ray": 0.0,
+                     "Ray Depth": 0.0, "Diffuse Depth": 0.0, "Glossy Depth": 0.0,
+                     "Transparent Depth": 0.0, "Transmission Depth": 0.0, "Portal Depth": 0.0}
+
+
+def _light_path(ev, node):
+    out = {}
+    for sock in node.outputs:
+        key = f"ray:{sock}"
+        if key in ev.inputs:
+            out[sock] = np.broadcast_to(np.asarray(ev.inputs[key], float), (ev.n,)).copy()
+        elif sock in LIGHT_PATH_CAMERA:
+            out[sock] = np.full(ev.n, LIGHT_PATH_CAMERA[sock])
+    return out
+
+
+def curve_lookup(table, x, extrapolate: bool):
+    """Cycles' float_ramp_lookup of a curve table (M,) at x (N,): linear between entries at
+    positions i / (M - 1); outside [0, 1] clamped, or extended along the end segments."""
+    table = np.asarray(table, float)
+    m = table.shape[0]
+    x = np.asarray(x, float)
+    f = np.clip(np.nan_to_num(x), 0.0, 1.0) * (m - 1)
+    i = np.clip(f.astype(int), 0, m - 1)
+    t = f - i
+    a = table[i]
+    a = np.where(t > 0, (1.0 - t) * a + t * table[np.minimum(i + 1, m - 1)], a)
+    if extrapolate:
+        lo = table[0] + (table[0] - table[1]) * (-x) * (m - 1)
+        hi = table[-1] + (table[-1] - table[-2]) * (x - 1.0) * (m - 1)
+        a = np.where(x < 0, lo, np.where(x > 1, hi, a))
+    return a
+
+
+def _curve_pos(node, v):
+    lo, hi = float(node.props["min_x"]), float(node.props["max_x"])
+    with np.errstate(**_ERR):
+        return (v - lo) / (hi - lo)
+
+
+def _rgb_curves(ev, node, vec_in="Color", out="Color"):
+    p = node.props
+    if "table" not in p:
+        raise UnsupportedNode(node.type, node.name, "no curve table (export it with bpy)")
+    table = np.asarray(p["table"], float)
+    c = ev.input(node, vec_in, "VECTOR")
+    fac = ev.input(node, "Fac", "VALUE")[:, None]
+    rel = _curve_pos(node, c)
+    ext = bool(p.get("extrapolate", False))
+    mapped = np.stack([curve_lookup(table[:, k], rel[:, k], ext) for k in range(3)], -1)
+    return {out: (1.0 - fac) * c + fac * mapped}
+
+
+def _vector_curves(ev, node):
+    return _rgb_curves(ev, node, "Vector", "Vector")
+
+
+def _float_curve(ev, node):
+    p = node.props
+    if "table" not in p:
+        raise UnsupportedNode(node.type, node.name, "no curve table (export it with bpy)")
+    v = ev.input(node, "Value", "VALUE")
+    fac = ev.input(node, "Factor", "VALUE")
+    m = curve_lookup(np.asarray(p["table"], float).reshape(-1), _curve_pos(node, v),
+                     bool(p.get("extrapolate", False)))
+    return {"Value": (1.0 - fac) * v + fac * m}
+
+
+def _transform_normals(ev, node, n):
+    """Object-space normals to world space (Cycles' object_normal_transform: normalised)."""
+    m = ev.inputs.get("normal_matrix")
+    if m is None:
+        raise MissingInput(f"node {node.type} '{node.name}' needs the per-hit input "
+                           "'normal_matrix'")
+    return _normalize(np.einsum("nij,nj->ni", np.broadcast_to(np.asarray(m, float),
+                                                               (ev.n, 3, 3)), n))
+
+
+def _normal_map(ev, node):
+    p = node.props
+    space = p.get("space", "TANGENT")
+    c = 2.0 * (ev.input(node, "Color", "VECTOR") - 0.5)
+    if p.get("convention", "OPENGL") == "DIRECTX":
+        c[:, 1] = -c[:, 1]
+    strength = ev.input(node, "Strength", "VALUE")
+    back = _backfacing(ev, node)
+    sd_n = ev.hit("normal_world", node)
+    if space == "TANGENT":
+        name = p.get("uv_map", "")
+        key = f"tangent:{name}" if name else "tangent"
+        t4 = np.asarray(ev.hit(key, node) if key in ev.inputs else ev.hit("tangent", node),
+                        float)
+        tangent, sign = t4[:, :3], t4[:, 3]
+        normal = ev.hit("normal", node) * np.where(back, -1.0, 1.0)[:, None]
+        c[:, 0] *= strength
+        c[:, 1] *= strength
+        c[:, 2] = 1.0 + np.clip(strength, 0.0, 1.0) * (c[:, 2] - 1.0)
+        b = sign[:, None] * np.cross(normal, tangent)
+        n = _normalize(c[:, :1] * tangent + c[:, 1:2] * b + c[:, 2:] * normal)
+        n = _transform_normals(ev, node, n)
+    else:
+        if space in ("BLENDER_OBJECT", "BLENDER_WORLD"):
+            c[:, 1:] = -c[:, 1:]
+        n = (_transform_normals(ev, node, c) if space in ("OBJECT", "BLENDER_OBJECT")
+             else _normalize(c))
+        s = np.maximum(strength, 0.0)[:, None]
+        n = np.where(strength[:, None] != 1.0, _normalize(sd_n + (n - sd_n) * s), n)
+    n = np.where(back[:, None], -n, n)
+    return {"Normal": np.where(np.all(n == 0, axis=1)[:, None], sd_n, n)}
+
+
+def _bump(ev, node):
+    n_in = _normal_in(ev, node)
+    fw = ev.input(node, "Filter Width", "VALUE")
+    dpdx, dpdy = ev.hit("dPdx", node), ev.hit("dPdy", node)
+    h_c = ev.input(node, "Height", "VALUE")
+    if (node.name, "Height") in ev.g.links:
+        h_x = ev.shifted("x", fw).input(node, "Height", "VALUE")
+        h_y = ev.shifted("y", fw).input(node, "Height", "VALUE")
+    else:
+        h_x = h_y = h_c
+    rx = np.cross(dpdy, n_in)
+    ry = np.cross(n_in, dpdx)
+    det = _dot(dpdx, rx)
+    surfgrad = (h_x - h_c)[:, None] * rx + (h_y - h_c)[:, None] * ry
+    strength = np.maximum(ev.input(node, "Strength", "VALUE"), 0.0)[:, None]
+    scale = ev.input(node, "Distance", "VALUE") * (-1.0 if node.props.get("invert") else 1.0)
+    out = _normalize((fw * np.abs(det))[:, None] * n_in
+                     - (scale * np.sign(det))[:, None] * surfgrad)
+    zero = np.all(out == 0, axis=1)[:, None]
+    return {"Normal": np.where(zero, n_in,
+                               _normalize(strength * out + (1.0 - strength) * n_in))}
+
+
 _NODE_FUNCS = {
     "ShaderNodeValue": _value, "ShaderNodeRGB": _rgb, "NodeReroute": _reroute,
     "ShaderNodeMath": _math, "ShaderNodeVectorMath": _vector_math,
@@ -959,7 +1321,13 @@ _NODE_FUNCS = {
     "ShaderNodeTexChecker": _tex_checker, "ShaderNodeTexGradient": _tex_gradient,
     "ShaderNodeTexCoord": _tex_coord, "ShaderNodeUVMap": _uv_map,
     "ShaderNodeVertexColor": _vertex_color, "ShaderNodeMapping": _mapping,
-    "ShaderNodeTexImage": _tex_image,
+    "ShaderNodeTexImage": _tex_image, "ShaderNodeTexNoise": _tex_noise,
+    "ShaderNodeTexVoronoi": _tex_voronoi, "ShaderNodeTexWave": _tex_wave,
+    "ShaderNodeFresnel": _fresnel, "ShaderNodeLayerWeight": _layer_weight,
+    "ShaderNodeNewGeometry": _geometry, "ShaderNodeAttribute": _attribute,
+    "ShaderNodeLightPath": _light_path, "ShaderNodeRGBCurve": _rgb_curves,
+    "ShaderNodeVectorCurve": _vector_curves, "ShaderNodeFloatCurve": _float_curve,
+    "ShaderNodeNormalMap": _normal_map, "ShaderNodeBump": _bump,
 }
 
 

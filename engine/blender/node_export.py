@@ -29,7 +29,7 @@ import numpy as np
 
 from .. import nodes as N
 
-__all__ = ["export_graph", "image_pixels", "output_socket"]
+__all__ = ["export_graph", "image_pixels", "output_socket", "curve_table"]
 
 # bl_idname -> properties read as they are (enums as their identifier strings, bools, numbers)
 _PROPS = {
@@ -46,7 +46,15 @@ _PROPS = {
     "ShaderNodeVertexColor": ("layer_name",),
     "ShaderNodeMapping": ("vector_type",),
     "ShaderNodeTexImage": ("interpolation", "projection", "extension"),
+    "ShaderNodeTexNoise": ("noise_dimensions", "noise_type", "normalize"),
+    "ShaderNodeTexVoronoi": ("voronoi_dimensions", "feature", "distance", "normalize"),
+    "ShaderNodeTexWave": ("wave_type", "bands_direction", "rings_direction", "wave_profile"),
+    "ShaderNodeAttribute": ("attribute_type", "attribute_name"),
+    "ShaderNodeNormalMap": ("space", "uv_map", "convention", "base"),
+    "ShaderNodeBump": ("invert",),
 }
+_CURVES = {"ShaderNodeRGBCurve": 4, "ShaderNodeVectorCurve": 3, "ShaderNodeFloatCurve": 1}
+_CURVE_TABLE = 256                     # Cycles' RAMP_TABLE_SIZE: the table has 257 entries
 _COLOUR_SPACES_LINEAR = ("Non-Color", "Linear Rec.709", "Linear CIE-XYZ E", "Linear Rec.2020",
                          "Linear CIE-XYZ D65", "Linear FilmLight E-Gamut", "ACEScg",
                          "ACES2065-1")
@@ -94,6 +102,33 @@ def image_pixels(image, warn=lambda m: None):
     return N.Image(px, encoding)
 
 
+def curve_table(mapping, n_curves: int) -> dict:
+    """A curve node's table as Cycles builds it when it syncs the node (blender/util.h,
+    curvemapping_color_to_array / curvemapping_float_to_array): ``min_x``/``max_x`` the
+    smallest first and largest last point x over the curves used (R, G, B and the combined C
+    for RGB Curves; X, Y, Z for Vector Curves; the one curve of Float Curve), and 257 entries
+    at x = min_x + i / 256 (max_x - min_x), each Blender's own curve evaluation
+    (``CurveMapping.evaluate``: handles, clipping, extension): R(C(x)), G(C(x)), B(C(x)) for
+    RGB Curves, X(x), Y(x), Z(x) for Vector Curves. ``extrapolate`` is the Extend mode."""
+    curves = list(mapping.curves)[:n_curves]
+    lo = min(float(c.points[0].location[0]) for c in curves)
+    hi = max(float(c.points[-1].location[0]) for c in curves)
+    mapping.update()
+    if hasattr(mapping, "initialize"):
+        mapping.initialize()
+    xs = (np.float32(lo) + np.arange(_CURVE_TABLE + 1, dtype=np.float32)
+          / np.float32(_CURVE_TABLE) * (np.float32(hi) - np.float32(lo)))
+    ev = mapping.evaluate
+    if n_curves == 1:
+        table = [float(ev(curves[0], float(x))) for x in xs]
+    elif n_curves == 4:
+        table = [[float(ev(c, ev(curves[3], float(x)))) for c in curves[:3]] for x in xs]
+    else:
+        table = [[float(ev(c, float(x))) for c in curves] for x in xs]
+    return {"table": table, "min_x": lo, "max_x": hi,
+            "extrapolate": mapping.extend == "EXTRAPOLATED"}
+
+
 def export_graph(tree, warn=lambda m: None, images: dict | None = None) -> N.Graph:
     """The graph of a bpy node tree (see the module docstring)."""
     images = {} if images is None else images
@@ -113,6 +148,8 @@ def export_graph(tree, warn=lambda m: None, images: dict | None = None) -> N.Gra
                                    for e in ramp.elements],
                          interpolation=ramp.interpolation, color_mode=ramp.color_mode,
                          hue_interpolation=ramp.hue_interpolation)
+        if node.bl_idname in _CURVES:
+            props.update(curve_table(node.mapping, _CURVES[node.bl_idname]))
         if node.bl_idname == "ShaderNodeTexImage" and node.image is not None:
             name = node.image.name
             if name not in images:
