@@ -106,12 +106,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from functools import lru_cache
+from pathlib import Path
+
 from . import fresnel as fresnel_module
 from . import microfacet as mf
 from . import sampling
 
 __all__ = ["MicrofacetReflection", "MicrofacetGlass", "SmoothGlass", "SmoothReflection",
-           "OrenNayar", "Translucent", "Transparent", "compensation"]
+           "OrenNayar", "Translucent", "Transparent", "Sheen", "sheen_table", "compensation"]
 
 
 def _dot(a, b):
@@ -431,6 +434,93 @@ class SmoothReflection:
     def albedo(self, wo, n):
         c = _dot(wo, n)
         return self.fresnel.reflectance(np.clip(c, 0.0, 1.0)) * (c > 0)[:, None]
+
+
+# -- Sheen -------------------------------------------------------------------------------------------
+SHEEN_TABLE = Path(__file__).resolve().parent / "data" / "sheen_ltc.npz"
+
+
+@lru_cache(maxsize=1)
+def sheen_table() -> dict:
+    """The sheen LTC table {"A", "a", "b": (32 mu, 32 roughness)} (``tools/sheen_ltc_table.py``)."""
+    with np.load(SHEEN_TABLE, allow_pickle=False) as data:
+        return {k: data[k].astype(np.float64) for k in ("A", "a", "b")}
+
+
+def _read_2d(grid, x, y):
+    """Cycles' node-centred bilinear read of ``grid`` [x, y] at x, y in [0, 1] (clamped)."""
+    size_x, size_y = grid.shape
+    fx = np.clip(x, 0.0, 1.0) * (size_x - 1)
+    fy = np.clip(y, 0.0, 1.0) * (size_y - 1)
+    ix = np.minimum(fx.astype(int), size_x - 2)
+    iy = np.minimum(fy.astype(int), size_y - 2)
+    tx, ty = fx - ix, fy - iy
+    return ((1 - tx) * (1 - ty) * grid[ix, iy] + tx * (1 - ty) * grid[ix + 1, iy]
+            + (1 - tx) * ty * grid[ix, iy + 1] + tx * ty * grid[ix + 1, iy + 1])
+
+
+class Sheen:
+    """Cycles' microfibre sheen (``bsdf_sheen.h``; Zeltner, Burley and Chiang 2022): in the
+    frame (t, b, n) with t along wo's tangential part, f cos_i = A D(wi) with the linearly
+    transformed cosine D(w) = z a^2 / (pi ((a x + b z)^2 + (a y)^2 + z^2)^2), a density on the
+    upper hemisphere, so f = A a^2 / (pi len^4), sampled exactly (weight A, pdf D). A, a, b are
+    read at (mu_o, roughness) from our table (``sheen_table``), roughness clamped to
+    [1e-3, 1] as Cycles does; a lobe with a < 1e-5 or A < 1e-5 is off (Cycles skips it)."""
+
+    def __init__(self, roughness):
+        self.roughness = np.clip(np.asarray(roughness, dtype=float), 1e-3, 1.0)
+
+    def subset(self, index):
+        return Sheen(self.roughness[index])
+
+    def _setup(self, wo, n):
+        mu = _dot(wo, n)
+        table = sheen_table()
+        A = _read_2d(table["A"], mu, self.roughness)
+        a = _read_2d(table["a"], mu, self.roughness)
+        b = _read_2d(table["b"], mu, self.roughness)
+        on = (mu > 0) & (np.abs(a) >= 1e-5) & (A >= 1e-5)
+        t0, b0 = sampling.orthonormal_basis(n)
+        tangent = wo - mu[:, None] * n
+        length = np.linalg.norm(tangent, axis=1, keepdims=True)
+        ok = length[:, 0] > 1e-7
+        t = np.where(ok[:, None], tangent / np.where(ok[:, None], length, 1.0), t0)
+        bt = np.where(ok[:, None], np.cross(n, t), b0)
+        return np.where(on, A, 0.0), np.where(on, a, 1.0), np.where(on, b, 0.0), on, t, bt
+
+    @staticmethod
+    def _density(local, a, b):
+        len2 = (a * local[:, 0] + b * local[:, 2]) ** 2 + (a * local[:, 1]) ** 2 + local[:, 2] ** 2
+        return a * a / (np.pi * len2 * len2)
+
+    def evaluate(self, wo, wi, n):
+        A, a, b, on, t, bt = self._setup(wo, n)
+        local = mf.to_local(wi, t, bt, n)
+        valid = on & (local[:, 2] > 0)
+        f = np.where(valid, A * self._density(local, a, b), 0.0)
+        return np.repeat(f[:, None], 3, axis=1)
+
+    def pdf(self, wo, wi, n):
+        A, a, b, on, t, bt = self._setup(wo, n)
+        local = mf.to_local(wi, t, bt, n)
+        valid = on & (local[:, 2] > 0)
+        return np.where(valid, local[:, 2] * self._density(local, a, b), 0.0)
+
+    def sample(self, wo, n, u):
+        A, a, b, on, t, bt = self._setup(wo, n)
+        r = np.sqrt(u[:, 0])
+        phi = 2.0 * np.pi * u[:, 1]
+        x, y = r * np.cos(phi), r * np.sin(phi)
+        z = np.sqrt(np.maximum(1.0 - x * x - y * y, 0.0))
+        local = _unit(np.stack([(x - z * b) / a, y / a, z], axis=1))
+        valid = on & (local[:, 2] > 0)
+        pdf = np.where(valid, local[:, 2] * self._density(local, a, b), 0.0)
+        weight = np.repeat(np.where(valid, A, 0.0)[:, None], 3, axis=1)
+        return mf.from_local(local, t, bt, n), weight, pdf
+
+    def albedo(self, wo, n):
+        A = self._setup(wo, n)[0]
+        return np.repeat(A[:, None], 3, axis=1)
 
 
 # -- Diffuse family ----------------------------------------------------------------------------------

@@ -22,10 +22,10 @@ closure        seed material (weight w multiplies each line)
 =============  ================================================================================
 principled     rho_d = Base Color (1 - Metallic)(1 - Transmission); rho_s = Base Color x
                Metallic + sqrt(Base Color)(1 - Metallic) Transmission, the roulette's shares
-               (coat, sheen, thin film, alpha: reported when they matter). The metal, the
-               dielectric specular layer (``bsdf.MaterialTable.transport_*`` for photons and
-               gather rays) and the transmission are rendered everywhere by their GGX and
-               glass lobes (``bsdf.glossy_material``)
+               (sheen, thin film, alpha: reported when they matter). The coat, the metal,
+               the dielectric specular layer (``bsdf.MaterialTable.transport_*`` for photons
+               and gather rays) and the transmission are rendered everywhere by their GGX and
+               glass lobes (``bsdf.glossy_material``), layered as Cycles layers them
 diffuse        rho_d = Color (Roughness > 0, Oren-Nayar, is reported and rendered Lambertian)
 glossy         rho_s = Color, the roulette's share; rendered everywhere as GGX
 metallic       rho_s = Base Color (F82) or ((n-1)^2 + k^2) / ((n+1)^2 + k^2) (physical), the
@@ -152,8 +152,6 @@ def _principled(c: Closure, note):
     if transmission > 0 and p["thin_wall"] > 0:
         note(f"Thin Wall of {name} is ignored: its transmission is rendered as a solid "
              "glass object's surface")
-    if p["coat_weight"] > 0:
-        note(f"Coat Weight of {name} is ignored")
     if p["sheen_weight"] > 0:
         note(f"Sheen Weight of {name} is ignored")
     if p["alpha"] < 1:
