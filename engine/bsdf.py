@@ -33,18 +33,24 @@ Parameters (per material, ``Scene.materials``; per hit after ``at``)
     exitance           W/m^2    radiant exitance M per channel
     emitted_radiance   W/m^2/sr L_e = M / pi per emitting side
     both_sides         bool     emits from both faces (Cycles' Emission shader does)
-    transport_diffuse  [0, 1]   what photons see: rho_d, below a Principled specular layer
-                                x (1 - max E_avg), E_avg its cosine-weighted mean albedo
-                                (``layer_average``)
-    transport_specular [0, 1]   the photons' and gather rays' specular share: rho_s + E_avg;
+    transport_diffuse  [0, 1]   what photons see: rho_d, below Principled layers (sheen,
+                                coat, specular) x the cosine-weighted mean of their diffuse
+                                share (``material_averages``)
+    transport_specular [0, 1]   the photons' and gather rays' specular share: rho_s plus the
+                                layers' cosine-weighted mean albedo;
                                 a specular pick samples the glossy lobes (``sample_glossy``)
     =================  =======  ===========================================================
 
 Glossy and glass lobes per material (``glossy_material``): ``GlossyLobe`` (GGX reflection),
-``GlassLobe`` (dielectric), composed as Cycles composes the Principled BSDF and the other
-nodes; ``layer_diffuse_factor`` is the diffuse share below a layer at a view direction and
-``reflection_albedo`` the reflection lobes' summed albedo (what a camera-path probe and a
-gather ray read where they land).
+``GlassLobe`` (dielectric), ``SheenLobe`` (microfibre sheen), composed as Cycles composes the
+Principled BSDF (``svm/closure.h``: sheen over coat over metal, transmission and the
+dielectric specular layer over the diffuse, each layer scaling what is below it by
+``closure_layering_weight``, clip(1 - max_channel(share x E(mu_o))), the coat also by its tint
+along the refracted view ray: ``TopLayer``) and the other nodes; ``layer_diffuse_factor`` is
+the diffuse share (RGB) below the layers at a view direction and ``reflection_albedo`` the
+reflection lobes' summed albedo (what a camera-path probe and a gather ray read where they
+land); ``material_averages`` their cosine-weighted means, what photons and gather rays see.
+Thin film (Principled, Metallic BSDF) enters through the Fresnel (``engine/fresnel.py``).
 """
 from __future__ import annotations
 
@@ -437,7 +443,7 @@ class GlossyMaterial:
         """(N, 3) the share of the diffuse below the layers at view directions ``wo``."""
         out = self._covers(wo, n)[-1] if self.tops else np.ones((len(wo), 3))
         if self.layer is not None:
-            albedo = self.layer.at(len(wo)).albedo(wo, n)
+            albedo = self.layer.at(len(wo)).layer_albedo(wo, n)
             out = out * np.clip(1.0 - albedo.max(axis=1), 0.0, 1.0)[:, None]
         return out
 
@@ -521,13 +527,19 @@ def _principled_lobes(c, lobes):
     multiscatter = c.distribution in ("MULTI_GGX", "")
     ax, ay = (float(v) for v in microfacet.alpha_principled(p["roughness"], p["anisotropic"]))
     metallic = float(np.clip(p["metallic"], 0, 1))
+    film = float(p["thin_film_thickness"])
+    film = film if film > fresnel_model.THIN_FILM_CUTOFF else 0.0
+    film_ior = max(float(p["thin_film_ior"]), 1e-5)
     if metallic > 0:
         f0 = np.clip(p["base_color"], 0, 1)
         tint = np.clip(p["specular_tint"], 0, 1)
-        lobes.append(GlossyLobe(weight * metallic, ax, ay,
-                                lambda n, f0=f0, tint=tint: fresnel_model.F82TintFresnel(
-                                    np.broadcast_to(f0, (n, 3)), tint),
-                                multiscatter, depth=depth))
+        if film:
+            make = (lambda n, f0=f0, tint=tint: fresnel_model.ThinFilmF82Fresnel(
+                np.broadcast_to(f0, (n, 3)), np.broadcast_to(tint, (n, 3)), film, film_ior))
+        else:
+            make = (lambda n, f0=f0, tint=tint: fresnel_model.F82TintFresnel(
+                np.broadcast_to(f0, (n, 3)), tint))
+        lobes.append(GlossyLobe(weight * metallic, ax, ay, make, multiscatter, depth=depth))
         weight = weight * (1 - metallic)
     ior = max(float(p["ior"]), 1e-5)
     f0 = float(fresnel_model.f0_from_ior(ior))
@@ -550,12 +562,17 @@ def _principled_lobes(c, lobes):
                                None if plain else np.broadcast_to(tinted, (3,)).copy(),
                                multiscatter, depth=depth))
     weight = weight * (1 - transmission)
-    if eta == 1.0 or not np.any(weight > 0):
+    if (eta == 1.0 and not film) or not np.any(weight > 0):
         return None, tops
-    layer = GlossyLobe(weight, ax, ay,
-                       lambda n, eta=eta, tinted=tinted: fresnel_model.TintedDielectricFresnel(
-                           np.full(n, eta), np.broadcast_to(tinted, (n, 3))),
-                       multiscatter, depth=depth)
+    if film:
+        # Cycles' dielectric under a film: the Airy reflectance over the substrate of index
+        # eta, scaled towards f0 (``fresnel.ThinFilmDielectricFresnel``).
+        make = (lambda n, eta=eta, tinted=tinted: fresnel_model.ThinFilmDielectricFresnel(
+            np.full(n, eta), np.broadcast_to(tinted, (n, 3)), film, film_ior))
+    else:
+        make = (lambda n, eta=eta, tinted=tinted: fresnel_model.TintedDielectricFresnel(
+            np.full(n, eta), np.broadcast_to(tinted, (n, 3))))
+    layer = GlossyLobe(weight, ax, ay, make, multiscatter, depth=depth)
     lobes.append(layer)
     return layer, tops
 
@@ -586,15 +603,33 @@ def glossy_material(closures) -> GlossyMaterial | None:
                                     multiscatter))
         elif c.kind == "metallic":
             ax, ay = (float(v) for v in microfacet.alpha_glossy(p["roughness"], p["anisotropy"]))
-            if p["physical"]:
+            film = max(float(p["thin_film_thickness"]), 1e-5)
+            film = film if film > fresnel_model.THIN_FILM_CUTOFF else 0.0
+            film_ior = max(float(p["thin_film_ior"]), 1e-5)
+            if p["physical"] and film:
+                make = (lambda n, ior=p["ior"], k=p["extinction"]:
+                        fresnel_model.ThinFilmConductorFresnel(
+                            np.broadcast_to(ior, (n, 3)), np.broadcast_to(k, (n, 3)), film,
+                            film_ior))
+            elif p["physical"]:
                 make = (lambda n, ior=p["ior"], k=p["extinction"]:
                         fresnel_model.ConductorFresnel(np.broadcast_to(ior, (n, 3)),
                                                        np.broadcast_to(k, (n, 3))))
+            elif film:
+                make = (lambda n, f0=np.clip(p["base_color"], 0, 1),
+                        tint=np.clip(p["edge_tint"], 0, 1):
+                        fresnel_model.ThinFilmF82Fresnel(np.broadcast_to(f0, (n, 3)),
+                                                         np.broadcast_to(tint, (n, 3)), film,
+                                                         film_ior))
             else:
                 make = (lambda n, f0=np.clip(p["base_color"], 0, 1),
                         tint=np.clip(p["edge_tint"], 0, 1):
                         fresnel_model.F82TintFresnel(np.broadcast_to(f0, (n, 3)), tint))
             lobes.append(GlossyLobe(c.weight.copy(), ax, ay, make, multiscatter))
+        elif c.kind == "sheen":
+            # The Sheen BSDF node: the microfibre lobe (Cycles' default distribution).
+            lobes.append(SheenLobe(c.weight * np.maximum(p["color"], 0),
+                                   float(np.clip(p["roughness"], 0, 1))))
         elif c.kind in ("glass", "refraction"):
             # Glass: the colour tints both branches (it is the closure's weight in Cycles);
             # Refraction: the refracted branch alone, (1 - F) of the light.
