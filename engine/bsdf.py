@@ -33,22 +33,28 @@ Parameters (per material, ``Scene.materials``; per hit after ``at``)
     exitance           W/m^2    radiant exitance M per channel
     emitted_radiance   W/m^2/sr L_e = M / pi per emitting side
     both_sides         bool     emits from both faces (Cycles' Emission shader does)
-    transport_diffuse  [0, 1]   what photons see: rho_d, below a Principled specular layer
-                                x (1 - max E_avg), E_avg its cosine-weighted mean albedo
-                                (``layer_average``)
-    transport_specular [0, 1]   the photons' and gather rays' specular share: rho_s + E_avg;
+    transport_diffuse  [0, 1]   what photons see: rho_d, below Principled layers (sheen,
+                                coat, specular) x the cosine-weighted mean of their diffuse
+                                share (``material_averages``)
+    transport_specular [0, 1]   the photons' and gather rays' specular share: rho_s plus the
+                                layers' cosine-weighted mean albedo;
                                 a specular pick samples the glossy lobes (``sample_glossy``)
     =================  =======  ===========================================================
 
 Glossy and glass lobes per material (``glossy_material``): ``GlossyLobe`` (GGX reflection),
-``GlassLobe`` (dielectric), composed as Cycles composes the Principled BSDF and the other
-nodes; ``layer_diffuse_factor`` is the diffuse share below a layer at a view direction and
-``reflection_albedo`` the reflection lobes' summed albedo (what a camera-path probe and a
-gather ray read where they land).
+``GlassLobe`` (dielectric), ``SheenLobe`` (microfibre sheen), composed as Cycles composes the
+Principled BSDF (``svm/closure.h``: sheen over coat over metal, transmission and the
+dielectric specular layer over the diffuse, each layer scaling what is below it by
+``closure_layering_weight``, clip(1 - max_channel(share x E(mu_o))), the coat also by its tint
+along the refracted view ray: ``TopLayer``) and the other nodes; ``layer_diffuse_factor`` is
+the diffuse share (RGB) below the layers at a view direction and ``reflection_albedo`` the
+reflection lobes' summed albedo (what a camera-path probe and a gather ray read where they
+land); ``material_averages`` their cosine-weighted means, what photons and gather rays see.
+Thin film (Principled, Metallic BSDF) enters through the Fresnel (``engine/fresnel.py``).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -56,12 +62,13 @@ from . import fresnel as fresnel_model
 from . import microfacet
 from . import sampling
 from .textures import MaterialTextures
-from .lobes import MicrofacetGlass, MicrofacetReflection, SmoothGlass, SmoothReflection
+from .lobes import (MicrofacetGlass, MicrofacetReflection, Sheen, SmoothGlass,
+                    SmoothReflection)
 
 __all__ = ["MaterialTable", "SurfaceParams", "Lambertian", "PerfectMirror", "SurfaceBSDF",
            "roulette_probabilities", "reflect", "GlossyLobe", "GlassLobe", "GlossyMaterial",
            "glossy_material", "sample_glossy", "layer_diffuse_factor", "layer_average",
-           "reflection_albedo",
+           "material_averages", "reflection_albedo", "SheenLobe", "TopLayer",
            "SHARP_ALPHA"]
 
 # A glossy lobe narrower than this (sqrt(alpha_x alpha_y)) takes the light of emitters it can
@@ -70,6 +77,8 @@ __all__ = ["MaterialTable", "SurfaceParams", "Lambertian", "PerfectMirror", "Sur
 SHARP_ALPHA = 0.1
 # Below this alpha_x alpha_y a microfacet lobe is a mirror (Cycles' delta threshold).
 DELTA_ALPHA2 = 2e-10
+# Cycles skips Principled components of weight at or below this (``CLOSURE_WEIGHT_CUTOFF``).
+CLOSURE_WEIGHT_CUTOFF = 1e-5
 
 
 def roulette_probabilities(rho_d: np.ndarray, rho_s: np.ndarray):
@@ -122,16 +131,17 @@ class MaterialTable:
         # specular, but for a Principled specular layer, which takes its cosine-weighted mean
         # albedo E_avg from the diffuse below it (1 - max E_avg) and becomes a specular share
         # E_avg that photons and gather rays sample by its GGX lobe (``layer_average``).
-        # ``layer_kept`` (M,) 1 - max E_avg and ``layer_albedo`` (M, 3) E_avg per material.
-        self.layer_kept = np.ones(len(self.diffuse))
+        # ``layer_kept`` (M, 3) the diffuse share below the layers and ``layer_albedo``
+        # (M, 3) the layered specular, their cosine-weighted means (``material_averages``).
+        self.layer_kept = np.ones_like(self.diffuse)
         self.layer_albedo = np.zeros_like(self.diffuse)
-        self.has_layer = any(g is not None and g.layer is not None for g in self.glossy)
+        self.has_layer = any(g is not None and g.layered for g in self.glossy)
         for material_id, spec in enumerate(self.glossy):
-            if spec is not None and spec.layer is not None:
-                average = layer_average(spec.layer)
-                self.layer_kept[material_id] = 1.0 - average.max()
+            if spec is not None and spec.layered:
+                share, average = material_averages(spec)
+                self.layer_kept[material_id] = share
                 self.layer_albedo[material_id] = average
-        self.transport_diffuse = self.diffuse * self.layer_kept[:, None]
+        self.transport_diffuse = self.diffuse * self.layer_kept
         self.transport_specular = self.specular + self.layer_albedo
         self.emitted_radiance = self.exitance / np.pi
         self.both_sides = table["both_sides"]
@@ -201,7 +211,7 @@ class SurfaceParams:
         cache["diffuse"], cache["specular"], cache["exitance"] = diffuse, specular, exitance
         cache["diffuse_over_pi"] = diffuse / np.pi
         cache["emitted_radiance"] = exitance / np.pi
-        cache["transport_diffuse"] = diffuse * np.take(table.layer_kept, material)[:, None]
+        cache["transport_diffuse"] = diffuse * np.take(table.layer_kept, material, axis=0)
         cache["transport_specular"] = specular + np.take(table.layer_albedo, material, axis=0)
 
     diffuse = property(lambda self: self._take("diffuse"))
@@ -345,6 +355,7 @@ class GlossyLobe:
     alpha_y: float
     make_fresnel: object
     multiscatter: bool
+    depth: int = 0
     transmits = False
 
     @property
@@ -382,6 +393,7 @@ class GlassLobe:
     transmission_tint: np.ndarray
     f0: np.ndarray | None
     multiscatter: bool
+    depth: int = 0
     transmits = True
     sharp = True
 
@@ -399,21 +411,123 @@ class GlassLobe:
 
 
 @dataclass
+class SheenLobe:
+    """Cycles' microfibre sheen (the Sheen BSDF node and the Principled BSDF's sheen):
+    ``weight`` (3,) times a ``lobes.Sheen`` of ``roughness`` (Zeltner et al. 2022's LTC, our
+    table measured from Cycles: ``tools/sheen_ltc_table.py``). Not sharp, not a delta."""
+
+    weight: np.ndarray
+    roughness: float
+    depth: int = 0
+    transmits = False
+    sharp = False
+    delta = False
+
+    def at(self, count: int, front=None):
+        return Sheen(np.full(count, self.roughness))
+
+
+@dataclass
+class TopLayer:
+    """A layer Cycles' Principled BSDF puts over everything below it (``svm/closure.h``):
+    the sheen, then the coat. ``lobe`` is its own lobe (its ``weight`` the closure's weight
+    times ``share``); ``share`` (3,) its weight relative to the layers below (Sheen Weight x
+    Sheen Tint, Coat Weight). The layers below are scaled by ``cover(wo, n)`` (N, 3): Cycles'
+    ``closure_layering_weight``, clip(1 - max_channel(share x E(mu_o)), 0, 1) with E the lobe's
+    directional albedo, times, for a coat, the tint's absorption along the refracted view ray,
+    mix(1, tint^(1 / cos_t), Coat Weight) with cos_t = sqrt(1 - (1 - mu_o^2) / coat_ior^2)
+    (Beer's law through a coat of unit thickness, normalised at normal incidence; Cycles takes
+    the view direction's path alone)."""
+
+    lobe: object
+    share: np.ndarray
+    tint: np.ndarray | None = None
+    coat_weight: float = 0.0
+    coat_ior: float = 1.5
+
+    def cover(self, wo, n) -> np.ndarray:
+        albedo = self.lobe.at(len(wo)).albedo(wo, n)
+        out = np.clip(1.0 - (self.share[None, :] * albedo).max(axis=1), 0.0, 1.0)
+        out = np.repeat(out[:, None], 3, axis=1)
+        if self.tint is not None:
+            mu = np.clip(np.einsum("ij,ij->i", wo, n), 0.0, 1.0)
+            cos_t = np.sqrt(np.maximum(1.0 - (1.0 - mu * mu) / self.coat_ior ** 2, 1e-12))
+            absorbed = np.maximum(self.tint, 0.0)[None, :] ** (1.0 / cos_t)[:, None]
+            out *= 1.0 + self.coat_weight * (absorbed - 1.0)
+        return out
+
+
+@dataclass
 class GlossyMaterial:
-    """The glossy lobes of one material and, for a Principled BSDF, its dielectric specular
-    layer, which scales the diffuse below it by 1 - max_channel(E_layer(mu_o)) (Cycles'
+    """The glossy lobes of one material and, for a Principled BSDF, its layers: ``tops`` (the
+    sheen and the coat, top first, ``TopLayer``) over everything, and the dielectric specular
+    ``layer`` over the diffuse, which scales it by 1 - max_channel(E_layer(mu_o)) (Cycles'
     ``closure_layering_weight``; E the layer's directional albedo with its Fresnel and
-    multiple-scattering compensation)."""
+    multiple-scattering compensation). A lobe of ``depth`` k lies below the first k tops:
+    its weight is ``lobe.weight`` times their covers at the view direction."""
 
     lobes: list
     layer: GlossyLobe | None = None
+    tops: list = field(default_factory=list)
+
+    @property
+    def layered(self) -> bool:
+        """Whether anything below a layer depends on the view direction."""
+        return self.layer is not None or bool(self.tops)
+
+    def _covers(self, wo, n):
+        """[1, cover_0, cover_0 cover_1, ...] (N, 3) each: what reaches depth k."""
+        out = [np.ones((len(wo), 3))]
+        for top in self.tops:
+            out.append(out[-1] * top.cover(wo, n))
+        return out
+
+    def lobe_weights(self, wo, n) -> list:
+        """Each lobe's weight (N, 3) at view directions ``wo``: ``weight`` x the covers above."""
+        if not self.tops:
+            return [np.broadcast_to(lobe.weight, (len(wo), 3)) for lobe in self.lobes]
+        covers = self._covers(wo, n)
+        return [lobe.weight[None, :] * covers[lobe.depth] for lobe in self.lobes]
 
     def diffuse_factor(self, wo, n) -> np.ndarray:
-        """(N,) the share of the diffuse below the layer at view directions ``wo``."""
-        if self.layer is None:
-            return np.ones(len(wo))
-        albedo = self.layer.at(len(wo)).albedo(wo, n)
-        return np.clip(1.0 - albedo.max(axis=1), 0.0, 1.0)
+        """(N, 3) the share of the diffuse below the layers at view directions ``wo``."""
+        out = self._covers(wo, n)[-1] if self.tops else np.ones((len(wo), 3))
+        if self.layer is not None:
+            albedo = self.layer.at(len(wo)).layer_albedo(wo, n)
+            out = out * np.clip(1.0 - albedo.max(axis=1), 0.0, 1.0)[:, None]
+        return out
+
+    def entries(self, count: int, wo, n, front=None) -> list:
+        """[(weight (N, 3), lobe at the hits, sharp, delta)] for ``count`` hits."""
+        weights = self.lobe_weights(wo, n)
+        return [(w, lobe.at(count, front), lobe.sharp, lobe.delta)
+                for w, lobe in zip(weights, self.lobes)]
+
+
+def _cosine_views(points: int = 64):
+    mu = (np.arange(points) + 0.5) / points
+    wo = np.stack([np.sqrt(1.0 - mu * mu), np.zeros(points), mu], axis=1)
+    n = np.ascontiguousarray(np.broadcast_to([0.0, 0.0, 1.0], (points, 3)))
+    return mu, wo, n
+
+
+def material_averages(spec: GlossyMaterial, points: int = 64):
+    """(diffuse share (3,), layered specular (3,)): the cosine-weighted means
+    2 int_0^1 g(mu) mu dmu of the diffuse factor below the layers and of the layered lobes'
+    albedo (the tops' lobes x the covers above them, plus the specular layer's), by the
+    midpoint rule over ``points`` view cosines: what photons and gather rays see of a
+    Principled BSDF's layers (``MaterialTable.transport_*``)."""
+    mu, wo, n = _cosine_views(points)
+    diffuse = 2.0 * (spec.diffuse_factor(wo, n) * mu[:, None]).mean(axis=0)
+    covers = spec._covers(wo, n)
+    specular = np.zeros(3)
+    for k, top in enumerate(spec.tops):
+        albedo = top.lobe.weight[None, :] * top.lobe.at(points).albedo(wo, n) * covers[k]
+        specular += 2.0 * (albedo * mu[:, None]).mean(axis=0)
+    if spec.layer is not None:
+        albedo = spec.layer.at(points).albedo(wo, n) * spec.layer.weight[None, :] * covers[-1]
+        specular += 2.0 * (albedo * mu[:, None]).mean(axis=0)
+    return diffuse, specular
 
 
 def layer_average(layer: GlossyLobe, points: int = 64) -> np.ndarray:
@@ -426,21 +540,56 @@ def layer_average(layer: GlossyLobe, points: int = 64) -> np.ndarray:
     return 2.0 * (albedo * mu[:, None]).mean(axis=0)
 
 
+def _principled_tops(c, p):
+    """The sheen and coat layers of a Principled closure (``TopLayer``s, top first), as
+    ``svm/closure.h`` stacks them: sheen (Sheen Weight x Sheen Tint, the microfibre lobe of
+    Sheen Roughness) over the coat (Coat Weight, GGX of alpha = Coat Roughness^2 with the
+    dielectric Fresnel of Coat IOR and Multiscatter GGX, as Cycles always sets it up), over
+    everything else."""
+    tops = []
+    sheen_weight = max(float(p["sheen_weight"]), 0.0)
+    if sheen_weight > CLOSURE_WEIGHT_CUTOFF:
+        share = sheen_weight * np.maximum(p["sheen_tint"], 0.0)
+        tops.append(TopLayer(SheenLobe(c.weight * share, float(np.clip(p["sheen_roughness"], 0, 1)),
+                                       depth=0), share))
+    coat_weight = max(float(p["coat_weight"]), 0.0)
+    if coat_weight > CLOSURE_WEIGHT_CUTOFF:
+        coat_ior = max(float(p["coat_ior"]), 1.0)
+        alpha = float(np.clip(p["coat_roughness"], 0, 1)) ** 2
+        lobe = GlossyLobe(c.weight * coat_weight, alpha, alpha,
+                          lambda n, eta=coat_ior: fresnel_model.DielectricFresnel(np.full(n, eta)),
+                          True, depth=len(tops))
+        tint = np.maximum(p["coat_tint"], 0.0)
+        tops.append(TopLayer(lobe, np.full(3, coat_weight),
+                             None if np.all(tint == 1.0) else tint, coat_weight, coat_ior))
+    return tops
+
+
 def _principled_lobes(c, lobes):
-    """Cycles' Principled stack (``svm/closure.h``): metal (F82 tint), transmission (glass),
-    then the dielectric specular layer over the diffuse; returns the layer (sheen, coat and
-    alpha are not rendered yet: export names them)."""
+    """Cycles' Principled stack (``svm/closure.h``): sheen and coat over everything
+    (``_principled_tops``), then metal (F82 tint), transmission (glass), then the dielectric
+    specular layer over the diffuse; returns (layer, tops) (alpha is not rendered yet: export
+    names it)."""
     p, weight = c.params, c.weight.copy()
+    tops = _principled_tops(c, p)
+    lobes.extend(top.lobe for top in tops)
+    depth = len(tops)
     multiscatter = c.distribution in ("MULTI_GGX", "")
     ax, ay = (float(v) for v in microfacet.alpha_principled(p["roughness"], p["anisotropic"]))
     metallic = float(np.clip(p["metallic"], 0, 1))
+    film = float(p["thin_film_thickness"])
+    film = film if film > fresnel_model.THIN_FILM_CUTOFF else 0.0
+    film_ior = max(float(p["thin_film_ior"]), 1e-5)
     if metallic > 0:
         f0 = np.clip(p["base_color"], 0, 1)
         tint = np.clip(p["specular_tint"], 0, 1)
-        lobes.append(GlossyLobe(weight * metallic, ax, ay,
-                                lambda n, f0=f0, tint=tint: fresnel_model.F82TintFresnel(
-                                    np.broadcast_to(f0, (n, 3)), tint),
-                                multiscatter))
+        if film:
+            make = (lambda n, f0=f0, tint=tint: fresnel_model.ThinFilmF82Fresnel(
+                np.broadcast_to(f0, (n, 3)), np.broadcast_to(tint, (n, 3)), film, film_ior))
+        else:
+            make = (lambda n, f0=f0, tint=tint: fresnel_model.F82TintFresnel(
+                np.broadcast_to(f0, (n, 3)), tint))
+        lobes.append(GlossyLobe(weight * metallic, ax, ay, make, multiscatter, depth=depth))
         weight = weight * (1 - metallic)
     ior = max(float(p["ior"]), 1e-5)
     f0 = float(fresnel_model.f0_from_ior(ior))
@@ -461,16 +610,21 @@ def _principled_lobes(c, lobes):
         lobes.append(GlassLobe(weight * transmission, float(p["roughness"]) ** 2, max(eta, 1e-5),
                                np.ones(3), np.sqrt(np.clip(p["base_color"], 0, None)),
                                None if plain else np.broadcast_to(tinted, (3,)).copy(),
-                               multiscatter))
+                               multiscatter, depth=depth))
     weight = weight * (1 - transmission)
-    if eta == 1.0 or not np.any(weight > 0):
-        return None
-    layer = GlossyLobe(weight, ax, ay,
-                       lambda n, eta=eta, tinted=tinted: fresnel_model.TintedDielectricFresnel(
-                           np.full(n, eta), np.broadcast_to(tinted, (n, 3))),
-                       multiscatter)
+    if (eta == 1.0 and not film) or not np.any(weight > 0):
+        return None, tops
+    if film:
+        # Cycles' dielectric under a film: the Airy reflectance over the substrate of index
+        # eta, scaled towards f0 (``fresnel.ThinFilmDielectricFresnel``).
+        make = (lambda n, eta=eta, tinted=tinted: fresnel_model.ThinFilmDielectricFresnel(
+            np.full(n, eta), np.broadcast_to(tinted, (n, 3)), film, film_ior))
+    else:
+        make = (lambda n, eta=eta, tinted=tinted: fresnel_model.TintedDielectricFresnel(
+            np.full(n, eta), np.broadcast_to(tinted, (n, 3))))
+    layer = GlossyLobe(weight, ax, ay, make, multiscatter, depth=depth)
     lobes.append(layer)
-    return layer
+    return layer, tops
 
 
 def glossy_material(closures) -> GlossyMaterial | None:
@@ -478,18 +632,18 @@ def glossy_material(closures) -> GlossyMaterial | None:
     (metal, transmission and dielectric layer), Glossy (Fresnel = its colour), Metallic (F82
     tint or the physical conductor), Glass and Refraction closures; None when there are none.
     Diffuse, emission and the rest stay with the seed's reduction (``shaders.seed_reduction``)."""
-    lobes, layer = [], None
+    lobes, layer, tops = [], None, []
     for c in closures:
         if not np.any(c.weight > 0):
             continue
         p = c.params
         multiscatter = c.distribution in ("MULTI_GGX", "")
         if c.kind == "principled":
-            found = _principled_lobes(c, lobes)
-            if found is not None:
-                if layer is not None:
+            found, found_tops = _principled_lobes(c, lobes)
+            if found is not None or found_tops:
+                if layer is not None or tops:
                     return None          # two layered Principled closures: not split yet
-                layer = found
+                layer, tops = found, found_tops
         elif c.kind == "glossy":
             ax, ay = (float(v) for v in microfacet.alpha_glossy(p["roughness"], p["anisotropy"]))
             color = np.clip(p["color"], 0, None)
@@ -499,15 +653,33 @@ def glossy_material(closures) -> GlossyMaterial | None:
                                     multiscatter))
         elif c.kind == "metallic":
             ax, ay = (float(v) for v in microfacet.alpha_glossy(p["roughness"], p["anisotropy"]))
-            if p["physical"]:
+            film = max(float(p["thin_film_thickness"]), 1e-5)
+            film = film if film > fresnel_model.THIN_FILM_CUTOFF else 0.0
+            film_ior = max(float(p["thin_film_ior"]), 1e-5)
+            if p["physical"] and film:
+                make = (lambda n, ior=p["ior"], k=p["extinction"]:
+                        fresnel_model.ThinFilmConductorFresnel(
+                            np.broadcast_to(ior, (n, 3)), np.broadcast_to(k, (n, 3)), film,
+                            film_ior))
+            elif p["physical"]:
                 make = (lambda n, ior=p["ior"], k=p["extinction"]:
                         fresnel_model.ConductorFresnel(np.broadcast_to(ior, (n, 3)),
                                                        np.broadcast_to(k, (n, 3))))
+            elif film:
+                make = (lambda n, f0=np.clip(p["base_color"], 0, 1),
+                        tint=np.clip(p["edge_tint"], 0, 1):
+                        fresnel_model.ThinFilmF82Fresnel(np.broadcast_to(f0, (n, 3)),
+                                                         np.broadcast_to(tint, (n, 3)), film,
+                                                         film_ior))
             else:
                 make = (lambda n, f0=np.clip(p["base_color"], 0, 1),
                         tint=np.clip(p["edge_tint"], 0, 1):
                         fresnel_model.F82TintFresnel(np.broadcast_to(f0, (n, 3)), tint))
             lobes.append(GlossyLobe(c.weight.copy(), ax, ay, make, multiscatter))
+        elif c.kind == "sheen":
+            # The Sheen BSDF node: the microfibre lobe (Cycles' default distribution).
+            lobes.append(SheenLobe(c.weight * np.maximum(p["color"], 0),
+                                   float(np.clip(p["roughness"], 0, 1))))
         elif c.kind in ("glass", "refraction"):
             # Glass: the colour tints both branches (it is the closure's weight in Cycles);
             # Refraction: the refracted branch alone, (1 - F) of the light.
@@ -518,16 +690,16 @@ def glossy_material(closures) -> GlossyMaterial | None:
                                    multiscatter))
     if not lobes:
         return None
-    return GlossyMaterial(lobes, layer)
+    return GlossyMaterial(lobes, layer, tops)
 
 
 def layer_diffuse_factor(table: MaterialTable, material_ids, wo, n) -> np.ndarray:
-    """(N,) the share of the diffuse below each hit's Principled specular layer at view
-    directions ``wo`` (``GlossyMaterial.diffuse_factor``: 1 - max E_layer(mu_o)), 1 where
-    the material has no layer."""
-    out = np.ones(len(material_ids))
+    """(N, 3) the share of the diffuse below each hit's Principled layers (sheen, coat,
+    specular) at view directions ``wo`` (``GlossyMaterial.diffuse_factor``), 1 where the
+    material has none."""
+    out = np.ones((len(material_ids), 3))
     layered = [m for m in np.unique(material_ids)
-               if table.glossy[m] is not None and table.glossy[m].layer is not None]
+               if table.glossy[m] is not None and table.glossy[m].layered]
     for material_id in layered:
         hits = np.flatnonzero(material_ids == material_id)
         out[hits] = table.glossy[material_id].diffuse_factor(wo[hits], n[hits])
@@ -536,16 +708,17 @@ def layer_diffuse_factor(table: MaterialTable, material_ids, wo, n) -> np.ndarra
 
 def reflection_albedo(table: MaterialTable, material_ids, wo, n) -> np.ndarray:
     """(N, 3) the summed directional albedo of each hit's glossy reflection lobes (glass lobes
-    left out) at view directions ``wo``: 0 where the material has none."""
+    left out; sheen and coat with the covers above the lobes below) at view directions
+    ``wo``: 0 where the material has none."""
     out = np.zeros((len(material_ids), 3))
     for material_id in np.unique(material_ids):
         spec = table.glossy[material_id]
         if spec is None:
             continue
         hits = np.flatnonzero(material_ids == material_id)
-        for lobe in spec.lobes:
-            if not lobe.transmits:
-                out[hits] += lobe.weight[None, :] * lobe.at(len(hits)).albedo(wo[hits], n[hits])
+        for w, lobe, _sharp, _delta in spec.entries(len(hits), wo[hits], n[hits]):
+            if not hasattr(lobe, "albedo_split"):
+                out[hits] += w * lobe.albedo(wo[hits], n[hits])
     return out
 
 
@@ -553,11 +726,12 @@ def sample_glossy(table: MaterialTable, material_ids, wo, n, rng, front=None,
                   with_delta: bool = False):
     """One direction per hit on materials with glossy lobes (``table.glossy``), in the hits'
     order, grouped by material: a lobe picked in proportion to the largest channel of its
-    weight x albedo(wo), then sampled. Returns (wi (N, 3), weight (N, 3) = w f |cos| /
-    (pdf P), sharp (N,) whether the picked lobe is sharp). ``wo``, ``n`` (N, 3) float64, ``n``
-    on wo's side; ``front`` (N,) whether each hit is on the front face (glass refracts into
-    the object there; None: all are). ``with_delta``: also return delta (N,), whether the
-    picked lobe is a delta (a mirror or smooth glass)."""
+    weight x albedo(wo) (the weight with the covers of the layers above it), then sampled.
+    Returns (wi (N, 3), weight (N, 3) = w f |cos| / (pdf P), sharp (N,) whether the picked
+    lobe is sharp). ``wo``, ``n`` (N, 3) float64, ``n`` on wo's side; ``front`` (N,) whether
+    each hit is on the front face (glass refracts into the object there; None: all are).
+    ``with_delta``: also return delta (N,), whether the picked lobe is a delta (a mirror or
+    smooth glass)."""
     count = len(material_ids)
     wi_out = np.zeros((count, 3))
     weight_out = np.zeros((count, 3))
@@ -569,26 +743,25 @@ def sample_glossy(table: MaterialTable, material_ids, wo, n, rng, front=None,
         if spec is None:
             continue
         side = None if front is None else front[hits]
-        lobes = [(lobe.weight, lobe.at(len(hits), side), lobe.sharp) for lobe in spec.lobes]
-        deltas = [lobe.delta for lobe in spec.lobes]
         wo_h, n_h = wo[hits], n[hits]
-        shares = np.stack([(w[None, :] * lobe.albedo(wo_h, n_h)).max(axis=1)
-                           for w, lobe, _ in lobes], axis=1)
+        lobes = spec.entries(len(hits), wo_h, n_h, side)
+        shares = np.stack([(w * lobe.albedo(wo_h, n_h)).max(axis=1)
+                           for w, lobe, _, _ in lobes], axis=1)
         total = shares.sum(axis=1)
         cdf = np.cumsum(shares, axis=1) / np.where(total > 0, total, 1.0)[:, None]
         pick = np.minimum((cdf < rng.random(len(hits))[:, None]).sum(axis=1), len(lobes) - 1)
         u = rng.random((len(hits), 3))
-        for j, (w, lobe, sharp) in enumerate(lobes):
+        for j, (w, lobe, sharp, delta) in enumerate(lobes):
             sel = np.flatnonzero((pick == j) & (total > 0))
             if len(sel) == 0:
                 continue
             wi, weight, _pdf = lobe.subset(sel).sample(wo_h[sel], n_h[sel], u[sel])
             at = hits[sel]
             wi_out[at] = wi
-            weight_out[at] = np.nan_to_num(weight * w[None, :] /
+            weight_out[at] = np.nan_to_num(weight * w[sel] /
                                            (shares[sel, j] / total[sel])[:, None])
             sharp_out[at] = sharp
-            delta_out[at] = deltas[j]
+            delta_out[at] = delta
     if with_delta:
         return wi_out, weight_out, sharp_out, delta_out
     return wi_out, weight_out, sharp_out

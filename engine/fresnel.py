@@ -49,15 +49,32 @@ Where Cycles is followed (``intern/cycles/kernel/closure/bsdf_util.h``, ``bsdf_m
 physical conductor through its F82 fit, and the Principled/Glass "generalized Schlick" remap
 F = mix(f0, 1, s) with s = (F_real - F0_real) / (1 - F0_real) clipped to [0, 1]
 (``TintedDielectricFresnel``; with f0 = F0_real it is the real Fresnel, which is how the Glass
-BSDF uses it). Thin-film iridescence is not implemented.
+BSDF uses it).
+
+Thin film (``iridescence``; Belcour and Barla 2017, "A Practical Extension to Microfacet
+Theory for the Modeling of Varying Iridescence"): a film of index ``film_ior`` and thickness
+[nm] over the dielectric or conductor; the Airy summation of the reflected orders m <= 3 with
+per-order phase (optical path difference 2 n_film d cos_t plus the interfaces' phase shifts),
+integrated against the linear Rec.709 colour matching functions in Fourier space
+(``tools/thin_film_table.py`` -> ``engine/data/thin_film_table.npz``), per channel, the two
+polarisations averaged, as Cycles does (``bsdf_util.h`` ``fresnel_iridescence_channel``). The
+F82 metal becomes the conductor of Gulbrandsen's (r, g) mapping; the multiple-scattering Fss
+stays the film-free one. The film Fresnels have no ``table_terms`` (their albedo is integrated
+numerically by the lobe) and ``smooth_estimate``: a layer's share of the light below it is read,
+as Cycles reads it, from F(mu_o) of the smooth surface.
 """
 from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 
 __all__ = ["dielectric", "conductor", "f82_tint_b", "f82", "f0_from_ior",
            "dielectric_average", "DielectricFresnel", "TintedDielectricFresnel",
-           "F82TintFresnel", "ConductorFresnel", "ConstantFresnel", "rgb_per_hit"]
+           "F82TintFresnel", "ConductorFresnel", "ConstantFresnel", "rgb_per_hit",
+           "iridescence", "gulbrandsen_nk", "thin_film_table", "ThinFilmDielectricFresnel",
+           "ThinFilmF82Fresnel", "ThinFilmConductorFresnel", "THIN_FILM_CUTOFF"]
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(128)
 
@@ -270,3 +287,230 @@ class ConstantFresnel:
 
     def table_terms(self):
         return [(self.color, "E", None)]
+
+
+# -- Thin-film iridescence (Belcour and Barla 2017) -----------------------------------------------
+THIN_FILM_TABLE = Path(__file__).resolve().parent / "data" / "thin_film_table.npz"
+THIN_FILM_CUTOFF = 0.1          # nm: thinner films are off (Cycles' THINFILM_THICKNESS_CUTOFF)
+
+
+@lru_cache(maxsize=1)
+def thin_film_table():
+    """(re, im) (3, 512): the Rec.709 sensitivities S_c(OPD) (``tools/thin_film_table.py``)."""
+    with np.load(THIN_FILM_TABLE, allow_pickle=False) as data:
+        return data["re"].astype(np.float64), data["im"].astype(np.float64)
+
+
+def _sensitivity(opd):
+    """S_c at optical path differences ``opd`` [nm] (N,) -> (re, im) (N, 3): the table read at
+    x = 2 pi OPD / 60000 by node-centred linear interpolation, clamped to its last node."""
+    re, im = thin_film_table()
+    size = re.shape[1]
+    f = np.clip(2.0 * np.pi * np.asarray(opd, float) / 60000.0, 0.0, 1.0) * (size - 1)
+    i = np.minimum(f.astype(int), size - 2)
+    t = (f - i)[:, None]
+    return ((1 - t) * re[:, i].T + t * re[:, i + 1].T, (1 - t) * im[:, i].T + t * im[:, i + 1].T)
+
+
+def _polarized_dielectric(cos_i, eta):
+    """(R_s, R_p, cos_t, sign_s, sign_p, tir) of a smooth dielectric of relative index ``eta``
+    for cosines ``cos_i`` (sign ignored); cos_t <= 0 (the refracted ray, against the normal),
+    sign_* the sign of the reflected amplitude (the cosine of its phase shift)."""
+    c = np.minimum(np.abs(cos_i), 1.0)
+    eta = np.asarray(eta, float)
+    squared = eta * eta - (1.0 - c * c)
+    tir = squared <= 0.0
+    cos_t = -np.sqrt(np.maximum(squared, 0.0)) / eta
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r_s = (c + eta * cos_t) / (c - eta * cos_t)
+        r_p = (cos_t + eta * c) / (eta * c - cos_t)
+    r_s = np.where(tir, 1.0, np.nan_to_num(r_s, nan=1.0))
+    r_p = np.where(tir, 1.0, np.nan_to_num(r_p, nan=1.0))
+    return (r_s * r_s, r_p * r_p, cos_t, np.where(r_s >= 0, 1.0, -1.0),
+            np.where(r_p >= 0, 1.0, -1.0), tir)
+
+
+def _polarized_conductor(cos_i, eta1, n, k, f82_value=None):
+    """(R_s, R_p, phasor_s, phasor_p) of a conductor n + i k seen from a medium of index
+    ``eta1`` (complex unit phasors of the reflected amplitudes); with ``f82_value`` both
+    reflectances follow the F82 curve through it at the rescaled F0 instead."""
+    c = np.abs(cos_i)
+    e1 = eta1
+    t1 = n * n - k * k - e1 * e1 * (1.0 - c * c)
+    t2 = np.sqrt(t1 * t1 + (2.0 * n * k) ** 2)
+    u2 = np.maximum(0.5 * (t2 + t1), 0.0)
+    v2 = np.maximum(0.5 * (t2 - t1), 0.0)
+    u, v = np.sqrt(u2), np.sqrt(v2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if f82_value is not None:
+            nn, kk2 = n / e1, (k / e1) ** 2
+            f0 = ((nn - 1.0) ** 2 + kk2) / ((nn + 1.0) ** 2 + kk2)
+            s = 1.0 - np.clip(c, 0.0, 1.0)
+            s5 = s ** 5
+            b = f82_b_from_value(f0, f82_value)
+            R_s = np.clip(f0 + (1.0 - f0) * s5 - b * c * s5 * s, 0.0, 1.0)
+            R_p = R_s
+        else:
+            R_s = np.nan_to_num(((e1 * c - u) ** 2 + v2) / ((e1 * c + u) ** 2 + v2))
+            t3 = (n * n - k * k) * c
+            t4 = 2.0 * n * k * c
+            R_p = np.nan_to_num(((t3 - e1 * u) ** 2 + (t4 - e1 * v) ** 2)
+                                / ((t3 + e1 * u) ** 2 + (t4 + e1 * v) ** 2))
+        phasor_s = (-u2 - v2 + (e1 * c) ** 2) + 1j * (-2.0 * e1 * c * v)
+        phasor_p = (((n * n + k * k) * c) ** 2 - e1 * e1 * (u2 + v2)) + \
+            1j * (2.0 * e1 * c * (2.0 * n * k * u - (n * n - k * k) * v))
+    phasor_s = np.where(np.abs(phasor_s) > 0, phasor_s / np.abs(phasor_s), 1.0)
+    phasor_p = np.where(np.abs(phasor_p) > 0, phasor_p / np.abs(phasor_p), 1.0)
+    return R_s, R_p, phasor_s, phasor_p
+
+
+def _airy(R12, R23, opd, phasor):
+    """Belcour and Barla's Eq. 10 truncated after m = 3 (as Cycles): (N, 3)."""
+    T121 = 1.0 - R12
+    R123 = R12 * R23
+    r123 = np.sqrt(R123)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        Rs = np.nan_to_num(T121 * T121 * R23 / (1.0 - R123))
+    R = Rs + R12
+    Cm = Rs - T121
+    acc = phasor * np.ones_like(R)
+    for m in range(1, 4):
+        Cm = Cm * r123
+        s_re, s_im = _sensitivity(m * opd)
+        R = R + Cm * 2.0 * (acc.real * s_re + acc.imag * s_im)
+        acc = acc * phasor
+    return R
+
+
+def iridescence(cos_i, film_ior, thickness, n, k=None, f82_value=None):
+    """Thin-film reflectance (N, 3) seen from air (index 1) at cosines ``cos_i`` (N,): a film
+    of ``film_ior`` (N,) and ``thickness`` [nm] (N,) over a dielectric of index ``n`` (N,) or,
+    with ``k`` (N, 3), a conductor n + i k ((N, 3); ``f82_value`` (N, 3) makes its
+    reflectance the F82 curve's). Cycles' ``fresnel_iridescence_channel``: films under 1 nm
+    blend their index towards air's; TIR at either interface gives 1; the Airy sum over
+    m <= 3 with the channel sensitivities, the polarisations averaged, clipped to [0, 1]."""
+    cos_i = np.asarray(cos_i, float)
+    thickness = np.asarray(thickness, float)
+    film = np.asarray(film_ior, float)
+    t = np.clip(thickness, 0.0, 1.0)
+    film = np.where(thickness < 1.0, 1.0 + (film - 1.0) * t * t * (3.0 - 2.0 * t), film)
+    R12s, R12p, cos2, sign12s, sign12p, tir = _polarized_dielectric(cos_i, film)
+    cos2_, film_, thick_ = cos2[:, None], film[:, None], thickness[:, None]
+    if k is None:
+        R23s, R23p, _, sign23s, sign23p, tir23 = _polarized_dielectric(
+            -cos2, np.asarray(n, float) / film)
+        tir = tir | tir23
+        R23s, R23p = R23s[:, None], R23p[:, None]
+        phasor23s, phasor23p = sign23s[:, None], sign23p[:, None]
+    else:
+        R23s, R23p, phasor23s, phasor23p = _polarized_conductor(-cos2_, film_, n, k, f82_value)
+    opd = (-2.0 * film_ * thick_ * cos2_)[:, 0]
+    R_s = _airy(R12s[:, None], R23s, opd, phasor23s * -sign12s[:, None])
+    R_p = _airy(R12p[:, None], R23p, opd, phasor23p * -sign12p[:, None])
+    R = np.clip(0.5 * (R_s + R_p), 0.0, 1.0)
+    return np.where(tir[:, None], 1.0, R)
+
+
+def gulbrandsen_nk(f0, f82_value):
+    """(n, k) (N, 3) of Gulbrandsen's "Artist Friendly Metallic Fresnel" read with r = F0
+    (capped at 0.999) and g = the F82 curve's value at 82 degrees, as Cycles maps its F82 metal
+    to a conductor under a film."""
+    r = np.minimum(f0, 0.999)
+    root = np.sqrt(r)
+    n = (1.0 + root) / (1.0 - root) * (1.0 - f82_value) + (1.0 - r) / (1.0 + r) * f82_value
+    k = np.sqrt(np.maximum((r * (n + 1.0) ** 2 - (n - 1.0) ** 2) / (1.0 - r), 0.0))
+    return n, k
+
+
+class ThinFilmDielectricFresnel(TintedDielectricFresnel):
+    """The Principled/Glass dielectric under a thin film: the film's reflectance over the
+    substrate of index ``eta`` (``iridescence``), then scaled per channel towards f0 / F0_real
+    by s = clip((F - 1) / (F0_real - 1)) (Cycles' artistic F0 control under a film). The
+    multiple-scattering Fss is the film-free one (``average``), as in Cycles. ``film_ior`` is
+    the film's index relative to the outside (a back face divides it by the bulk index)."""
+
+    smooth_estimate = True
+
+    def __init__(self, eta, f0, thickness, film_ior):
+        super().__init__(eta, f0)
+        count = len(self.eta)
+        self.thickness = np.broadcast_to(np.asarray(thickness, float), (count,)).copy()
+        self.film_ior = np.broadcast_to(np.asarray(film_ior, float), (count,)).copy()
+
+    def subset(self, index):
+        return ThinFilmDielectricFresnel(self.eta[index], self.f0[index], self.thickness[index],
+                                         self.film_ior[index])
+
+    def key(self, i):
+        """The parameters of hit ``i`` (a cache key for the integrated albedo)."""
+        return ("dielectric", float(self.eta[i]), *self.f0[i].tolist(),
+                float(self.thickness[i]), float(self.film_ior[i]))
+
+    def reflectance(self, cos_i):
+        F = iridescence(cos_i, self.film_ior, self.thickness, self.eta)
+        F0 = f0_from_ior(self.eta)[:, None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = np.clip((F - 1.0) / (F0 - 1.0), 0.0, 1.0)
+            factor = self.f0 / F0
+        scaled = F * (1.0 + (factor - 1.0) * s)
+        keep = (F0 <= 1e-5) | np.all(F == 1.0, axis=1, keepdims=True)
+        return np.where(keep, F, np.nan_to_num(scaled))
+
+    def table_terms(self):
+        return None
+
+
+class ThinFilmF82Fresnel(F82TintFresnel):
+    """Cycles' F82-tint metal under a thin film: the conductor of ``gulbrandsen_nk`` (F0, the
+    F82 value), its reflectance the F82 curve's, under the film (``iridescence``)."""
+
+    smooth_estimate = True
+
+    def __init__(self, f0, tint, thickness, film_ior):
+        super().__init__(f0, tint)
+        count = len(self.f0)
+        self.thickness = np.broadcast_to(np.asarray(thickness, float), (count,)).copy()
+        self.film_ior = np.broadcast_to(np.asarray(film_ior, float), (count,)).copy()
+
+    def subset(self, index):
+        return ThinFilmF82Fresnel(self.f0[index], self.tint[index], self.thickness[index],
+                                  self.film_ior[index])
+
+    def key(self, i):
+        return ("f82", *self.f0[i].tolist(), *self.tint[i].tolist(), float(self.thickness[i]),
+                float(self.film_ior[i]))
+
+    def reflectance(self, cos_i):
+        g = f82(np.full(len(self.f0), 1.0 / 7.0), self.f0, self.b)
+        n, k = gulbrandsen_nk(self.f0, g)
+        return iridescence(cos_i, self.film_ior, self.thickness, n, k, g)
+
+    def table_terms(self):
+        return None
+
+
+class ThinFilmConductorFresnel(ConductorFresnel):
+    """The physical conductor n + i k under a thin film (``iridescence``, exact polarised
+    conductor reflectances); Fss film-free through the F82 fit, as ``ConductorFresnel``."""
+
+    smooth_estimate = True
+
+    def __init__(self, n, k, thickness, film_ior):
+        super().__init__(n, k)
+        count = len(self.n)
+        self.thickness = np.broadcast_to(np.asarray(thickness, float), (count,)).copy()
+        self.film_ior = np.broadcast_to(np.asarray(film_ior, float), (count,)).copy()
+
+    def subset(self, index):
+        return ThinFilmConductorFresnel(self.n[index], self.k[index], self.thickness[index],
+                                        self.film_ior[index])
+
+    def key(self, i):
+        return ("conductor", *self.n[i].tolist(), *self.k[i].tolist(),
+                float(self.thickness[i]), float(self.film_ior[i]))
+
+    def reflectance(self, cos_i):
+        return iridescence(cos_i, self.film_ior, self.thickness, self.n, self.k)
+
+    def table_terms(self):
+        return None

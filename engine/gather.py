@@ -282,7 +282,7 @@ def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfa
         rho = surface.diffuse_over_pi
         if surfaces.materials.has_layer:
             rho = rho * layer_diffuse_factor(surfaces.materials, surface.material,
-                                             -dirs.astype(np.float64), ng)[:, None]
+                                             -dirs.astype(np.float64), ng)
         diffuse = np.any(rho > 0, axis=1)
         if diffuse.any():
             e = estimates.lookup(x[diffuse], ng[diffuse]).astype(np.float64)

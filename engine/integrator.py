@@ -319,7 +319,7 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
                 rho = surface.diffuse_over_pi[met]
                 if materials.has_layer:
                     rho = rho * layer_diffuse_factor(materials, surface.material[met], wo_met,
-                                                     n_met)[:, None]
+                                                     n_met)
                 rho = rho + reflection_albedo(materials, surface.material[met], wo_met,
                                               n_met) / np.pi
                 value = photon.surface_irradiance(x[met], ng[met]) * rho * thr[met]
@@ -554,7 +554,7 @@ def _add_irradiance(e, at, surface, glossy, thr, rays, spp, depth, indirect_sums
     first hit; the light passes' kinds at the first hit (``passes.LightSums``)."""
     value = e * surface.diffuse_over_pi[at]
     if glossy is not None:
-        value *= glossy.diffuse_factor[at][:, None]
+        value *= glossy.diffuse_factor[at]
         if light is not None and depth == 0:
             light.add(rays[at], value, direct=False, kind=DIFFUSE)
         if glossy_part:
@@ -600,11 +600,18 @@ def _shade_direct(context, stats, rng, depth, idx, x, ns, ng, surface, thr, rays
         key += mat_d
         factor = None if diffuse_factor is None else diffuse_factor[idx]
         for target, scalar, rgb in terms:
-            if factor is not None:
-                scalar = scalar * (factor if target is None else factor[target])
-            hist = np.bincount(key if target is None else key[target], weights=scalar,
-                               minlength=len(direct_sums) * count)
-            value = hist.reshape(-1, count) @ (materials.diffuse_over_pi * rgb)
+            keys = key if target is None else key[target]
+            if factor is None:
+                hist = np.bincount(keys, weights=scalar, minlength=len(direct_sums) * count)
+                value = hist.reshape(-1, count) @ (materials.diffuse_over_pi * rgb)
+            else:
+                # The share below the layers is RGB (a tinted coat): one histogram a channel.
+                part = factor if target is None else factor[target]
+                value = np.stack([np.bincount(keys, weights=scalar * part[:, c],
+                                              minlength=len(direct_sums) * count
+                                              ).reshape(-1, count)
+                                  @ (materials.diffuse_over_pi[:, c] * np.asarray(rgb, np.float64)[c])
+                                  for c in range(3)], axis=1)
             direct_sums += value
             if light is not None:
                 light.light[DIFFUSE, 0] += value
@@ -612,7 +619,7 @@ def _shade_direct(context, stats, rng, depth, idx, x, ns, ng, surface, thr, rays
         e = irradiance_from_terms(terms, len(x[idx]))
         e *= surface.diffuse_over_pi[idx]
         if diffuse_factor is not None:
-            e *= diffuse_factor[idx][:, None]
+            e *= diffuse_factor[idx]
         if depth > 0:
             e *= thr[idx]
         in_order = pixel_of is None and isinstance(idx, slice)
@@ -637,7 +644,7 @@ class _GlossyHits:
 
     ``index`` (G,) the glossy hits among the vertex's N hits, ``mask`` (N,), ``goes_on`` (N,)
     the hits where the path goes on, ``group_of`` / ``row_of`` (N,) each hit's material group
-    and its row in that group's lobes, ``diffuse_factor`` (N,) the share of the diffuse below a Principled
+    and its row in that group's lobes, ``diffuse_factor`` (N, 3) the share of the diffuse below a Principled
     specular layer (1 elsewhere), ``ending_albedo`` (N, 3) the glossy albedo at ending hits
     (0 elsewhere). With ``split`` (the light passes): ``reflected`` / ``transmitted`` (N, 3)
     the lobes' albedo by branch (glass lobes split, ``lobes.SmoothGlass.albedo_split``) and
@@ -649,7 +656,7 @@ class _GlossyHits:
         self.mask = surface.camera_glossy
         self.index = np.flatnonzero(self.mask)
         self.count = len(self.index)
-        self.diffuse_factor = np.ones(count)
+        self.diffuse_factor = np.ones((count, 3))
         self.ending_albedo = np.zeros((count, 3))
         self.goes_on = np.zeros(count, bool)
         if split:
@@ -659,7 +666,7 @@ class _GlossyHits:
         self.wo, self.n = wo, n
         self.materials = materials
         self.material_ids = surface.material[self.index]
-        self.groups = []        # (hits (k,) into the vertex, [(weight (3,), lobe, sharp)])
+        self.groups = []        # (hits (k,) into the vertex, [(weight (k, 3), lobe, sharp)])
         self.group_of = np.full(count, -1)
         self.row_of = np.zeros(count, np.int64)
         ids = self.material_ids
@@ -669,12 +676,12 @@ class _GlossyHits:
             self.row_of[hits] = np.arange(len(hits))
             spec = materials.glossy[material_id]
             wo_h, n_h = wo[hits].astype(np.float64), n[hits].astype(np.float64)
-            lobes = [(lobe.weight, lobe.at(len(hits), self.front[hits]), lobe.sharp)
-                     for lobe in spec.lobes]
-            if spec.layer is not None:
+            lobes = [(w, lobe, sharp) for w, lobe, sharp, _delta
+                     in spec.entries(len(hits), wo_h, n_h, self.front[hits])]
+            if spec.layered:
                 self.diffuse_factor[hits] = spec.diffuse_factor(wo_h, n_h)
-            albedo = sum(w[None, :] * lobe.albedo(wo_h, n_h) for w, lobe, _ in lobes)
-            diffuse = surface.diffuse[hits] * self.diffuse_factor[hits][:, None]
+            albedo = sum(w * lobe.albedo(wo_h, n_h) for w, lobe, _ in lobes)
+            diffuse = surface.diffuse[hits] * self.diffuse_factor[hits]
             goes_on = albedo.max(axis=1) > diffuse.max(axis=1)
             self.goes_on[hits] = goes_on
             self.ending_albedo[hits] = albedo * ~goes_on[:, None]
@@ -685,8 +692,8 @@ class _GlossyHits:
                         r, t = lobe.albedo_split(wo_h, n_h)
                     else:
                         r, t = lobe.albedo(wo_h, n_h), 0.0
-                    self.reflected[hits] += w[None, :] * r
-                    self.transmitted[hits] += w[None, :] * t
+                    self.reflected[hits] += w * r
+                    self.transmitted[hits] += w * t
                 self.ending_transmitted[hits] = self.transmitted[hits] * ~goes_on[:, None]
 
     def sample(self, rng):
@@ -728,7 +735,7 @@ class _GlossyHits:
             for w, lobe, sharp in lobes:
                 if hittable == "world" or (sharp and hittable == "mesh"):
                     continue
-                f[sel] += w[None, :] * lobe.subset(rows[sel]).evaluate(wo, wi, n)
+                f[sel] += w[rows[sel]] * lobe.subset(rows[sel]).evaluate(wo, wi, n)
         return f
 
 
@@ -770,7 +777,7 @@ def _first_hit_colors(light, rays, surface, glossy):
     diffuse = surface.diffuse
     specular = surface.specular
     if glossy is not None:
-        diffuse = diffuse * glossy.diffuse_factor[:, None]
+        diffuse = diffuse * glossy.diffuse_factor
         specular = np.where(glossy.mask[:, None], glossy.reflected, specular)
         light.add_color(rays, TRANSMISSION, glossy.transmitted)
     light.add_color(rays, DIFFUSE, diffuse)

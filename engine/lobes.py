@@ -18,6 +18,11 @@ Every lobe has the interface of ``engine/bsdf.py`` (pbrt's f / Sample_f / PDF):
                              GGX it is Cycles' isotropic stand-in at (alpha_x alpha_y)^(1/4),
                              up to 20 % off for a 3:1 aspect)
     ``albedo_split(wo, n)``  glass lobes only: ``albedo``'s (reflected, transmitted) branches
+    ``layer_albedo(wo, n)``  reflection lobes: what the lobe takes from the light below it as a
+                             layer (``albedo``; for a thin-film Fresnel Cycles' estimate from
+                             the smooth F(mu_o)). A Fresnel without tables (thin film) has its
+                             albedo integrated over visible normals on a 32-cosine grid, cached
+                             per distinct lobe.
     ``subset(index)``        the lobe at the hits ``index``
 
 Directions are unit (N, 3) arrays pointing away from the surface (wo to the viewer, wi to the
@@ -44,6 +49,12 @@ Lobes and the papers they follow
         (2 pi - 5.6)/3 to 1e-10 by quadrature, so the white furnace is 1). Note the leading rho: Cycles multiplies
         the whole closure (the multiple-scattering term included) by the colour, so its
         f_ms carries rho^3 where the EON paper has rho^2; we follow Cycles. Cosine sampling.
+    ``Sheen``  Cycles' microfibre sheen (Zeltner, Burley and Chiang 2022, "Practical
+        Multiple-Scattering Sheen Using Linearly Transformed Cosines"): f cos = A D(wi), D a
+        linearly transformed cosine of (a, b) in the frame of wo, A the albedo, read from our
+        32 x 32 table over (mu_o, roughness) (``tools/sheen_ltc_table.py``: measured from
+        Cycles' renders and fitted by moments). Sampled exactly (weight A). Like Cycles' it is
+        not reciprocal (the transform follows wo).
     ``Translucent``  colour / pi on the side opposite wo; cosine sampling about -n.
     ``Transparent``  a delta pass-through: wi = -wo, weight = colour.
 
@@ -99,6 +110,7 @@ Parameters (per hit; (N,) unless RGB (N, 3))
                                   ``fresnel.TintedDielectricFresnel``)
     albedo (rho)        RGB       Oren-Nayar colour                                  -
     sigma               [0, 1]    Oren-Nayar roughness (Diffuse Roughness)           -
+    roughness (sheen)   [0, 1]    sheen roughness (clamped to >= 1e-3, as Cycles)    -
     color               RGB       translucent / transparent / mirror colour          -
     ==================  ========  =================================================  =========
 """
@@ -106,12 +118,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from functools import lru_cache
+from pathlib import Path
+
 from . import fresnel as fresnel_module
 from . import microfacet as mf
 from . import sampling
 
 __all__ = ["MicrofacetReflection", "MicrofacetGlass", "SmoothGlass", "SmoothReflection",
-           "OrenNayar", "Translucent", "Transparent", "compensation"]
+           "OrenNayar", "Translucent", "Transparent", "Sheen", "sheen_table", "compensation"]
 
 
 def _dot(a, b):
@@ -207,15 +222,77 @@ class MicrofacetReflection:
             self._scale(lo[:, 2])
         return mf.from_local(li, t, b, n), weight, pdf
 
+    def layer_albedo(self, wo, n):
+        """What a layer of this lobe takes from the light below it (Cycles' albedo estimate):
+        ``albedo``, but F(mu_o) of the smooth surface times Cycles' multiple-scattering
+        darkening (1 + Fms (1 - E)/E) / (1 + (1 - E)/E) for a thin-film Fresnel, whose
+        microfacet albedo Cycles does not tabulate."""
+        if not getattr(self.fresnel, "smooth_estimate", False):
+            return self.albedo(wo, n)
+        mu = np.clip(_dot(wo, n), 0.0, 1.0)
+        F = self.fresnel.reflectance(mu)
+        scale = np.ones_like(F)
+        m = self.multiscatter
+        if m.any():
+            r = mf.table_roughness(self.alpha_x[m], self.alpha_y[m])
+            E = np.maximum(mf.table("E", r, mu[m]), 1e-4)[:, None]
+            full = compensation(E[:, 0], mf.table("Eavg", r), self.fresnel.subset(m).average())
+            scale[m] = full / (1.0 + (1.0 - E) / E)
+        return F * scale * (mu > 0)[:, None]
+
+    def _integrated_albedo(self, mu):
+        """int F G2/G1 over visible normals (N, 3) for Fresnels without tables: on a grid of
+        32 view cosines by 32 x 32 stratified normals per distinct lobe (cached), read back by
+        linear interpolation in mu."""
+        out = np.zeros((len(mu), 3))
+        keys = [(float(ax), float(ay), self.fresnel.key(i))
+                for i, (ax, ay) in enumerate(zip(self.alpha_x, self.alpha_y))]
+        for key in set(keys):
+            hits = np.array([k == key for k in keys])
+            grid = _ALBEDO_CACHE.get(key)
+            if grid is None:
+                first = int(np.flatnonzero(hits)[0])
+                grid = _integrate_albedo(key[0], key[1], self.fresnel.subset([first]))
+                _ALBEDO_CACHE[key] = grid
+            nodes = np.linspace(0.0, 1.0, len(grid))
+            out[hits] = np.stack([np.interp(mu[hits], nodes, grid[:, c]) for c in range(3)], 1)
+        return out
+
     def albedo(self, wo, n):
         mu = np.clip(_dot(wo, n), 0.0, 1.0)
         r = mf.table_roughness(self.alpha_x, self.alpha_y)
+        if self.fresnel.table_terms() is None:
+            total = np.minimum(self._integrated_albedo(mu), mf.table("E", r, mu)[:, None])
+            return total * self._scale(mu) * (mu > 0)[:, None]
         total = 0.0
         for coefficient, name, eta in self.fresnel.table_terms():
             total = total + coefficient * mf.table(name, r, mu, eta)[:, None]
         # F <= 1 bounds the albedo by the white lobe's (the conductor's F82 fit can overshoot).
         total = np.clip(total, 0.0, mf.table("E", r, mu)[:, None])
         return total * self._scale(mu) * (mu > 0)[:, None]
+
+
+_ALBEDO_CACHE: dict = {}
+
+
+def _integrate_albedo(ax, ay, fresnel, nodes=32, side=32):
+    """(nodes, 3): the single-scattering albedo int F(v.h) G2/G1 of GGX (ax, ay) over visible
+    normals at mu = linspace(1e-4, 1), by side^2 stratified samples (``microfacet.sample_vndf``,
+    Heitz 2018), for a one-hit Fresnel object."""
+    u = (np.stack(np.meshgrid(np.arange(side), np.arange(side), indexing="ij"), -1)
+         .reshape(-1, 2) + 0.5) / side
+    k = len(u)
+    mu = np.clip(np.linspace(0.0, 1.0, nodes), 1e-4, 1.0)
+    m = np.repeat(mu, k)
+    v = np.stack([np.sqrt(1.0 - m * m), np.zeros_like(m), m], axis=1)
+    a_x, a_y = np.full(len(m), ax), np.full(len(m), ay)
+    h = mf.sample_vndf(v, a_x, a_y, np.tile(u, (nodes, 1)))
+    c = np.clip(_dot(v, h), 0.0, 1.0)
+    w = 2.0 * c[:, None] * h - v
+    lam_v = mf.ggx_lambda(v, a_x, a_y)
+    ratio = np.where(w[:, 2] > 0, (1.0 + lam_v) / (1.0 + lam_v + mf.ggx_lambda(w, a_x, a_y)), 0.0)
+    F = fresnel.subset(np.zeros(len(m), dtype=int)).reflectance(c)
+    return (F * ratio[:, None]).reshape(nodes, k, 3).mean(axis=1)
 
 
 # -- Dielectric glass ----------------------------------------------------------------------------------
@@ -431,6 +508,95 @@ class SmoothReflection:
     def albedo(self, wo, n):
         c = _dot(wo, n)
         return self.fresnel.reflectance(np.clip(c, 0.0, 1.0)) * (c > 0)[:, None]
+
+    layer_albedo = albedo
+
+
+# -- Sheen -------------------------------------------------------------------------------------------
+SHEEN_TABLE = Path(__file__).resolve().parent / "data" / "sheen_ltc.npz"
+
+
+@lru_cache(maxsize=1)
+def sheen_table() -> dict:
+    """The sheen LTC table {"A", "a", "b": (32 mu, 32 roughness)} (``tools/sheen_ltc_table.py``)."""
+    with np.load(SHEEN_TABLE, allow_pickle=False) as data:
+        return {k: data[k].astype(np.float64) for k in ("A", "a", "b")}
+
+
+def _read_2d(grid, x, y):
+    """Cycles' node-centred bilinear read of ``grid`` [x, y] at x, y in [0, 1] (clamped)."""
+    size_x, size_y = grid.shape
+    fx = np.clip(x, 0.0, 1.0) * (size_x - 1)
+    fy = np.clip(y, 0.0, 1.0) * (size_y - 1)
+    ix = np.minimum(fx.astype(int), size_x - 2)
+    iy = np.minimum(fy.astype(int), size_y - 2)
+    tx, ty = fx - ix, fy - iy
+    return ((1 - tx) * (1 - ty) * grid[ix, iy] + tx * (1 - ty) * grid[ix + 1, iy]
+            + (1 - tx) * ty * grid[ix, iy + 1] + tx * ty * grid[ix + 1, iy + 1])
+
+
+class Sheen:
+    """Cycles' microfibre sheen (``bsdf_sheen.h``; Zeltner, Burley and Chiang 2022): in the
+    frame (t, b, n) with t along wo's tangential part, f cos_i = A D(wi) with the linearly
+    transformed cosine D(w) = z a^2 / (pi ((a x + b z)^2 + (a y)^2 + z^2)^2), a density on the
+    upper hemisphere, so f = A a^2 / (pi len^4), sampled exactly (weight A, pdf D). A, a, b are
+    read at (mu_o, roughness) from our table (``sheen_table``), roughness clamped to
+    [1e-3, 1] as Cycles does; a lobe with a < 1e-5 or A < 1e-5 is off (Cycles skips it)."""
+
+    def __init__(self, roughness):
+        self.roughness = np.clip(np.asarray(roughness, dtype=float), 1e-3, 1.0)
+
+    def subset(self, index):
+        return Sheen(self.roughness[index])
+
+    def _setup(self, wo, n):
+        mu = _dot(wo, n)
+        table = sheen_table()
+        A = _read_2d(table["A"], mu, self.roughness)
+        a = _read_2d(table["a"], mu, self.roughness)
+        b = _read_2d(table["b"], mu, self.roughness)
+        on = (mu > 0) & (np.abs(a) >= 1e-5) & (A >= 1e-5)
+        t0, b0 = sampling.orthonormal_basis(n)
+        tangent = wo - mu[:, None] * n
+        length = np.linalg.norm(tangent, axis=1, keepdims=True)
+        ok = length[:, 0] > 1e-7
+        t = np.where(ok[:, None], tangent / np.where(ok[:, None], length, 1.0), t0)
+        bt = np.where(ok[:, None], np.cross(n, t), b0)
+        return np.where(on, A, 0.0), np.where(on, a, 1.0), np.where(on, b, 0.0), on, t, bt
+
+    @staticmethod
+    def _density(local, a, b):
+        len2 = (a * local[:, 0] + b * local[:, 2]) ** 2 + (a * local[:, 1]) ** 2 + local[:, 2] ** 2
+        return a * a / (np.pi * len2 * len2)
+
+    def evaluate(self, wo, wi, n):
+        A, a, b, on, t, bt = self._setup(wo, n)
+        local = mf.to_local(wi, t, bt, n)
+        valid = on & (local[:, 2] > 0)
+        f = np.where(valid, A * self._density(local, a, b), 0.0)
+        return np.repeat(f[:, None], 3, axis=1)
+
+    def pdf(self, wo, wi, n):
+        A, a, b, on, t, bt = self._setup(wo, n)
+        local = mf.to_local(wi, t, bt, n)
+        valid = on & (local[:, 2] > 0)
+        return np.where(valid, local[:, 2] * self._density(local, a, b), 0.0)
+
+    def sample(self, wo, n, u):
+        A, a, b, on, t, bt = self._setup(wo, n)
+        r = np.sqrt(u[:, 0])
+        phi = 2.0 * np.pi * u[:, 1]
+        x, y = r * np.cos(phi), r * np.sin(phi)
+        z = np.sqrt(np.maximum(1.0 - x * x - y * y, 0.0))
+        local = _unit(np.stack([(x - z * b) / a, y / a, z], axis=1))
+        valid = on & (local[:, 2] > 0)
+        pdf = np.where(valid, local[:, 2] * self._density(local, a, b), 0.0)
+        weight = np.repeat(np.where(valid, A, 0.0)[:, None], 3, axis=1)
+        return mf.from_local(local, t, bt, n), weight, pdf
+
+    def albedo(self, wo, n):
+        A = self._setup(wo, n)[0]
+        return np.repeat(A[:, None], 3, axis=1)
 
 
 # -- Diffuse family ----------------------------------------------------------------------------------

@@ -22,10 +22,10 @@ closure        seed material (weight w multiplies each line)
 =============  ================================================================================
 principled     rho_d = Base Color (1 - Metallic)(1 - Transmission); rho_s = Base Color x
                Metallic + sqrt(Base Color)(1 - Metallic) Transmission, the roulette's shares
-               (coat, sheen, thin film, alpha: reported when they matter). The metal, the
-               dielectric specular layer (``bsdf.MaterialTable.transport_*`` for photons and
-               gather rays) and the transmission are rendered everywhere by their GGX and
-               glass lobes (``bsdf.glossy_material``)
+               (sheen, thin film, alpha: reported when they matter). The coat, the metal,
+               the dielectric specular layer (``bsdf.MaterialTable.transport_*`` for photons
+               and gather rays) and the transmission are rendered everywhere by their GGX and
+               glass lobes (``bsdf.glossy_material``), layered as Cycles layers them
 diffuse        rho_d = Color (Roughness > 0, Oren-Nayar, is reported and rendered Lambertian)
 glossy         rho_s = Color, the roulette's share; rendered everywhere as GGX
 metallic       rho_s = Base Color (F82) or ((n-1)^2 + k^2) / ((n+1)^2 + k^2) (physical), the
@@ -35,8 +35,9 @@ glass,         rho_s = Color: rendered everywhere (camera, photons, gather) by i
 refraction     (``bsdf.GlassLobe``: smooth or GGX dielectric); rho_s is its roulette share
 transparent,   black (reported)
 holdout
-translucent,   rho_d = Color (reported)
-sheen
+translucent    rho_d = Color (reported)
+sheen          rho_s = Color, the roulette's share; rendered everywhere by the microfibre lobe
+               (``bsdf.SheenLobe``; Ashikhmin is reported and rendered as Microfiber)
 emission       M = pi x Color x Strength (radiance Color x Strength on each side)
 =============  ================================================================================
 
@@ -173,10 +174,6 @@ def _principled(c: Closure, note):
     if transmission_max > 0 and np.any(p["thin_wall"] > 0):
         note(f"Thin Wall of {name} is ignored: its transmission is rendered as a solid "
              "glass object's surface")
-    if np.any(p["coat_weight"] > 0):
-        note(f"Coat Weight of {name} is ignored")
-    if np.any(p["sheen_weight"] > 0):
-        note(f"Sheen Weight of {name} is ignored")
     if np.any(p["alpha"] < 1):
         note(f"Alpha < 1 of {name} is ignored (rendered opaque)")
     if np.any(p["subsurface_weight"] > 0) and metallic_max < 1 and transmission_max < 1:
@@ -185,8 +182,9 @@ def _principled(c: Closure, note):
     if np.any(p["diffuse_roughness"] > 0) and metallic_max < 1 and transmission_max < 1:
         note(f"Diffuse Roughness {_fmt(np.mean(p['diffuse_roughness']))} of {name} (Oren-Nayar) is "
              "rendered as Lambertian")
-    if np.any(p["thin_film_thickness"] > 0):
-        note(f"Thin Film of {name} is ignored (the Fresnel has no interference)")
+    if np.any(p["thin_film_thickness"] > 0.1) and transmission_max > 0:
+        note(f"Thin Film of {name} is approximated: its transmission (glass) is rendered "
+             "without the film (the reflection layers have it)")
     return diffuse, specular, exitance
 
 
@@ -226,13 +224,19 @@ def seed_reduction(closures) -> SeedMaterial:
         elif c.kind in ("transparent", "holdout"):
             label = "Transparent BSDF" if c.kind == "transparent" else "Holdout"
             note(f"{label} {name} is not supported; rendered black")
-        elif c.kind in ("translucent", "sheen"):
+        elif c.kind == "translucent":
             d = p["color"]
-            label = "Translucent BSDF" if c.kind == "translucent" else "Sheen BSDF"
-            note(f"{label} {name} is not supported; treated as a diffuse of colour {_fmt(d)}")
-        if c.kind in ("metallic", "glass") and np.any(p["thin_film_thickness"] > 0):
-            label = "Metallic BSDF" if c.kind == "metallic" else "Glass BSDF"
-            note(f"Thin Film of {label} {name} is ignored (the Fresnel has no interference)")
+            note(f"Translucent BSDF {name} is not supported; treated as a diffuse of colour "
+                 f"{_fmt(d)}")
+        elif c.kind == "sheen":
+            # Rendered by its microfibre lobe (``bsdf.SheenLobe``); rho_s is its roulette share.
+            s = np.asarray(p["color"], np.float64)
+            if c.distribution not in ("", "MICROFIBER"):
+                note(f"Sheen BSDF {name}: the {c.distribution.title()} distribution is "
+                     "rendered as Microfiber")
+        if c.kind == "glass" and np.any(p["thin_film_thickness"] > 0.1):
+            note(f"Thin Film of Glass BSDF {name} is ignored (the glass Fresnel has no "
+                 "interference yet)")
         diffuse = diffuse + w * d
         specular = specular + w * s
         exitance = exitance + w * e

@@ -57,7 +57,7 @@ def sphere_radiance(closures, emitted, rho, points=64, quadrature=256):
                 for lobe in layered.lobes).reshape(quadrature, quadrature)
         kernel[row] = (f * grid_mu).sum(axis=1) * (2 * np.pi / quadrature) / quadrature
     views = np.stack([np.sqrt(1 - mu ** 2), np.zeros(points), mu], 1)
-    diffuse_share = layered.diffuse_factor(views, np.tile([0.0, 0.0, 1.0], (points, 1)))
+    diffuse_share = layered.diffuse_factor(views, np.tile([0.0, 0.0, 1.0], (points, 1)))[:, 0]
     radiance = np.full(points, emitted)
     for _ in range(500):
         at_i = np.interp(mu_i, mu, radiance)

@@ -162,6 +162,11 @@ def _ggx(ax, ay=None, fresnel=None, tangent=True, multiscatter=False):
                                   multiscatter=multiscatter)
 
 
+def _film(count=1, thickness=500.0):
+    return fr.ThinFilmDielectricFresnel(np.full(count, 1.5), np.full((count, 3), 0.04),
+                                        thickness, 1.33)
+
+
 REPORT = {}
 
 
@@ -177,6 +182,14 @@ REPORT = {}
      lambda: L.MicrofacetGlass(np.array([0.44]), 1 / 1.5), (0.9, 0.5)),
     ("oren-nayar s=1", lambda: L.OrenNayar(ONES.copy(), 1.0), None, (0.8, 0.2)),
     ("translucent", lambda: L.Translucent(ONES.copy()), None, (0.6,)),
+    ("sheen r=0.5", lambda: L.Sheen(np.array([0.5])), lambda: L.Sheen(np.array([0.6])),
+     (0.9, 0.5, 0.15)),
+    ("sheen r=0.15", lambda: L.Sheen(np.array([0.15])), None, (0.25, 0.08)),
+    ("ggx thin film a=0.3", lambda: _ggx(0.3, fresnel=_film(), tangent=False),
+     lambda: _ggx(0.33, fresnel=_film(), tangent=False), (0.9, 0.4)),
+    ("ggx F82 thin film a=0.2", lambda: _ggx(0.2, fresnel=fr.ThinFilmF82Fresnel(
+        np.array([[0.955, 0.638, 0.538]]), np.ones((1, 3)), 250.0, 1.5), tangent=False),
+     None, (0.8,)),
 ])
 def test_sample_matches_pdf_and_the_furnace_holds(name, make, wider, mus):
     lobe = make()
@@ -303,6 +316,9 @@ def _pairs(count, seed, lower=False):
                                      fr.DielectricFresnel(np.full(k, 1.45))),
     lambda k: L.MicrofacetGlass(np.full(k, 0.3), 1.5),
     lambda k: L.OrenNayar(np.full((k, 3), 0.8), 0.7),
+    lambda k: L.MicrofacetReflection(np.full(k, 0.25), np.full(k, 0.25), _film(k)),
+    lambda k: L.MicrofacetReflection(np.full(k, 0.3), np.full(k, 0.3), fr.ThinFilmF82Fresnel(
+        np.full((k, 3), 0.8), np.full((k, 3), 0.7), 300.0, 1.4)),
 ])
 def test_reflection_is_reciprocal(make):
     a, b, n = _pairs(20_000, 3)
@@ -450,3 +466,54 @@ def test_report_figures(capsys):
         for (name, mu), (statistic, threshold, mean) in sorted(REPORT.items()):
             stat = "" if statistic is None else f"chi2 {statistic:7.1f} < {threshold:.0f}"
             print(f"  {name:24s} mu={mu:<4} furnace {np.round(mean, 4)} {stat}")
+
+
+def test_sheen_furnace_and_table():
+    """The sheen's white furnace: its albedo A (the weight of every sample) is within [0, 1]
+    over the whole table, and the pdf is a density (integrates to 1 where the lobe is on: the
+    chi-square test above); its albedo is what our table holds, a bilinear read."""
+    table = L.sheen_table()
+    assert table["A"].min() >= 0.0 and table["A"].max() <= 1.0, table["A"].max()
+    mus = np.linspace(0.02, 1.0, 50)
+    for r in (0.05, 0.3, 0.7, 1.0):
+        lobe = L.Sheen(np.full(len(mus), r))
+        wo = np.stack([np.sqrt(1 - mus ** 2), np.zeros_like(mus), mus], 1)
+        albedo = lobe.albedo(wo, _tile(N_AXIS, len(mus)))
+        assert np.all(albedo <= 1.0) and np.all(albedo >= 0.0)
+
+
+def test_sheen_table_matches_its_measurement():
+    """Our LTC (a, b) reproduce the moments measured from Cycles' renders
+    (``tools/sheen_ltc_table.py``) within 4 standard errors plus 2e-3 at the nodes where the
+    lobe is on."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("sheen_ltc_table",
+                                                  ROOT / "tools" / "sheen_ltc_table.py")
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    with np.load(L.SHEEN_TABLE) as data:
+        a, b, A, ex, ez, se = (data[k] for k in ("a", "b", "A", "Ex", "Ez", "se_Ex"))
+    rng = np.random.default_rng(5)
+    on = np.argwhere(A[1:-1, 1:] > 0.05) + [1, 1]
+    for i, j in on[rng.choice(len(on), 40, replace=False)]:
+        mx, mz = tool.ltc_moments(a[i, j], b[i, j])
+        assert abs(mx - ex[i, j]) <= 4 * se[i, j] + 2e-3, (i, j, mx, ex[i, j])
+        assert abs(mz - ez[i, j]) <= 4 * se[i, j] + 2e-3, (i, j, mz, ez[i, j])
+
+
+def test_thin_film_reflectance():
+    """Thin film (Belcour and Barla 2017 as Cycles integrates it): within [0, 1] everywhere (so
+    a filmed lobe's furnace stays below the plain GGX's); no film (thickness 0) is the plain
+    dielectric; a 500 nm film of index 1.33 over glass at normal incidence is coloured
+    (green low: 0.0085 against Cycles' render of a black Principled at roughness 0.2, 0.0086)."""
+    mu = np.linspace(0.0, 1.0, 201)
+    for thickness in (0.0, 50.0, 300.0, 500.0, 1200.0, 5000.0):
+        for film_ior, n in ((1.33, 1.5), (1.8, 1.5), (1.2, 2.4), (1.5, 1.0 / 1.5)):
+            F = fr.iridescence(mu, np.full(len(mu), film_ior), np.full(len(mu), thickness),
+                               np.full(len(mu), n))
+            assert np.all((F >= 0.0) & (F <= 1.0))
+    bare = fr.iridescence(mu, np.full(len(mu), 1.33), np.zeros(len(mu)), np.full(len(mu), 1.5))
+    np.testing.assert_allclose(bare, np.repeat(fr.dielectric(mu, 1.5)[0][:, None], 3, 1),
+                               atol=1e-9)
+    F = fr.iridescence(np.ones(1), np.full(1, 1.33), np.full(1, 500.0), np.full(1, 1.5))[0]
+    np.testing.assert_allclose(F, [0.0357, 0.0085, 0.0366], atol=5e-4)

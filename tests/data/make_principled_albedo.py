@@ -120,6 +120,21 @@ POINTS = {
                                 "Metallic": 0.5},
     "copper r0.3 coat1": {"Base Color": COPPER, "Roughness": 0.3, "Metallic": 1.0,
                           "Coat Weight": 1.0},
+    # Issue 23, part 2: coat tint, sheen and thin film.
+    "orange coat1 tint": {"Base Color": (0.8, 0.3, 0.1), "Roughness": 0.3, "Coat Weight": 1.0,
+                          "Coat Tint": (0.9, 0.5, 0.3)},
+    "black sheen1 sr0.5": {"Base Color": (0.0, 0.0, 0.0), "Roughness": 0.5, "Sheen Weight": 1.0},
+    "orange sheen1 sr0.3": {"Base Color": (0.8, 0.3, 0.1), "Roughness": 0.5, "Sheen Weight": 1.0,
+                            "Sheen Roughness": 0.3},
+    "grey sheen0.5 tint coat": {"Base Color": (0.5, 0.5, 0.5), "Roughness": 0.5,
+                                "Sheen Weight": 0.5, "Sheen Tint": (0.2, 0.6, 1.0),
+                                "Sheen Roughness": 0.8, "Coat Weight": 1.0},
+    "black film500": {"Base Color": (0.0, 0.0, 0.0), "Roughness": 0.2,
+                      "Thin Film Thickness": 500.0, "Thin Film IOR": 1.33},
+    "grey film300 ior1.8": {"Base Color": (0.5, 0.5, 0.5), "Roughness": 0.4,
+                            "Thin Film Thickness": 300.0, "Thin Film IOR": 1.8},
+    "copper film250": {"Base Color": COPPER, "Roughness": 0.3, "Metallic": 1.0,
+                       "Thin Film Thickness": 250.0, "Thin Film IOR": 1.5},
 }
 
 
@@ -128,6 +143,7 @@ def _material(name: str, inputs: dict):
     bsdf = mat.node_tree.nodes["Principled BSDF"]
     values = {"Base Color": WHITE, **inputs}
     for socket, value in values.items():
+        value = tuple(value) if isinstance(value, list) else value
         bsdf.inputs[socket].default_value = (*value, 1.0) if isinstance(value, tuple) else value
     return mat
 
