@@ -66,6 +66,16 @@ def _filter_wrap(a: np.ndarray, kernel: np.ndarray, axis: int) -> np.ndarray:
             + kernel[2] * np.roll(a, -1, axis=axis))
 
 
+def euler_rotation(rot) -> np.ndarray:
+    """(3, 3) rotation of XYZ Euler angles ``rot`` [rad] (Cycles' ``euler_to_transform``, as
+    the Mapping node applies it)."""
+    cx, cy, cz = np.cos(rot)
+    sx, sy, sz = np.sin(rot)
+    return np.array([[cy * cz, sy * sx * cz - cx * sz, sy * cx * cz + sx * sz],
+                     [cy * sz, sy * sx * sz + cx * cz, sy * cx * sz - sx * cz],
+                     [-sy, cy * sx, cy * cx]])
+
+
 def direction_to_equirectangular(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Cycles' (u, v) of unit directions (N, 3) in the texture's frame."""
     u = 0.5 - np.arctan2(d[:, 1], d[:, 0]) / (2.0 * np.pi)

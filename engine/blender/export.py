@@ -121,6 +121,7 @@ import bpy
 
 from ..settings import RenderSettings
 from . import compat
+from .world_export import environment_of
 from ..shaders import CLOSURE_KINDS, Closure, seed_reduction
 from ..scene import (AREA_SHAPES, AreaLight, Camera, Material, PointLight, Scene, SceneError,
                      SpotLight, SunLight, World)
@@ -703,10 +704,14 @@ def _world_radiance(reader: _NodeReader, src, depth: int = 0) -> np.ndarray:
     return np.zeros(3)
 
 
-def _export_world(world, warn: _Warnings) -> World:
+def _export_world(world, warn: _Warnings, portals=()) -> World:
     if world is None:
-        return World()
+        return World(portals=list(portals))
     tree = world.node_tree
+    if compat.uses_nodes(world):
+        environment = environment_of(world, warn)
+        if environment is not None:
+            return World(environment=environment, portals=list(portals))
     if not compat.uses_nodes(world):
         radiance = np.array(world.color[:3], float)
     else:
@@ -718,7 +723,7 @@ def _export_world(world, warn: _Warnings) -> World:
         raise SceneError(f"World '{world.name}': colour {_fmt(radiance)} is not finite")
     if np.any(radiance < 0):
         warn(f"World '{world.name}': negative colour {_fmt(radiance)} clipped to 0")
-    return World(radiance=np.maximum(radiance, 0.0))
+    return World(radiance=np.maximum(radiance, 0.0), portals=list(portals))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -858,6 +863,7 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
     mesh_cache: dict = {}
     groups: dict = {}        # (object, mesh) -> _Group of instances
     lights = []
+    portals = []           # Cycles light portals: windows of the world, not lights
 
     mesh_parents: set = set()    # objects whose geometry arrived as MESH instances
     curve_like = []              # non-mesh geometry objects, converted if no mesh arrived
@@ -893,7 +899,17 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
             name = f"{parent.name}/{obj.name}"
         matrix = np.array(inst.matrix_world, np.float64)
 
-        if otype == "LIGHT":
+        if otype == "LIGHT" and obj.data.type == "AREA" and \
+                getattr(getattr(obj.data, "cycles", None), "is_portal", False):
+            # A light portal (Cycles): a window for the world's light, not a light.
+            data = obj.data
+            shape = data.shape if data.shape in AREA_SHAPES else "SQUARE"
+            size_y = float(data.size_y) if shape in ("RECTANGLE", "ELLIPSE") else float(data.size)
+            if np.all(np.isfinite(matrix)):
+                portals.append(AreaLight(name, shape=shape, matrix=matrix,
+                                         size_x=float(data.size), size_y=size_y,
+                                         power=np.zeros(3)))
+        elif otype == "LIGHT":
             light = _convert_light(name, obj.data, matrix, warn)
             if light is not None:
                 settings = getattr(obj.data, "lanterna", None)
@@ -984,7 +1000,7 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
             object_ids[start:end] = np.repeat(group.object_ids[c0:c0 + step], n_tri)
             start = end
 
-    world = _export_world(scene_eval.world, warn)
+    world = _export_world(scene_eval.world, warn, portals)
     out = Scene(triangles=triangles, material_ids=material_ids, materials=materials,
                 camera=camera, shading_normals=normals, object_ids=object_ids,
                 object_names=object_names, lights=lights, world=world,
