@@ -9,7 +9,10 @@ What it computes
     * sampled lights, integrated by Monte Carlo: area lights (square, rectangle, disk,
       ellipse), emissive meshes (seed 3.3.3, 7.1.3), suns with an angular diameter, point and
       spot lights with a radius (``SphereLight``: Cycles 4.x/5.x sphere lights, or its facing
-      disk under Soft Falloff; radiance Phi / (4 pi^2 R^2)), and a constant world.
+      disk under Soft Falloff; radiance Phi / (4 pi^2 R^2)), a constant world (``WorldLight``), and an image world or a world with portals
+      (``EnvironmentLight``: a radiance per sample, ``sample_rgb``; a mixture of the image's
+      CDF, cosine directions and points on portals weighted by the mixture's density, whose
+      ``solid_angle_pdf(points, normals, wi)`` serves MIS).
     Each sampled light gives, for points x with normals n and uniform numbers u, a direction,
     a distance for the shadow ray and a scalar weight: the irradiance estimate before visibility
     is ``weight * light.rgb`` (L cos(theta_x) / pdf(omega) for emitters); plus a cheap unoccluded estimate of its contribution used to share the samples

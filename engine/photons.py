@@ -12,8 +12,13 @@ What it computes (seed sections 9.1-9.5, corrections in DESIGN.md §4)
         sun (a disk covering the scene's bounds), area lights (area-uniform points, cosine
         directions, Eq. 9.5; collimated ones along the normal, 9.1.2), emissive meshes
         (triangle by area with ``searchsorted`` on cumulative areas, the seed's "area line",
-        area-uniform points, cosine directions, 9.1.3) and a constant world (a uniform
-        direction and a point on a disk covering the scene).
+        area-uniform points, cosine directions, 9.1.3) and the world: a constant one (a
+        uniform direction and a point on a disk covering the scene), an image world
+        (``environment.Environment``: directions from its CDF, power L / p x the disk's area
+        / n, pbrt-v3 ``InfiniteAreaLight::Sample_Le``), or, with light portals, through them
+        (``_portal_photons``: a point on a portal, a direction into the room from the mixture
+        of the CDF and cosine, power L cos A / (p n); photons whose way out to the sky is
+        blocked are dropped, which needs ``emit_photons``'s ``accel``).
     ``trace_photons(scene, accel, emitted, rng)``  all photons advance together through
         Embree; at each hit Russian roulette (9.2) with Pd, Ps the largest channels of the
         reflectances (``roulette_probabilities``) chooses diffuse / specular / absorb and

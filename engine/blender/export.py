@@ -70,7 +70,10 @@ animation already applied by Blender) and turns it into the renderer's inert sce
   - Zero power is skipped silently; negative power is skipped with a warning.
   - ``Light.lanterna``: ``photon_share`` goes onto every light; ``shadow_photons`` onto area
     lights (the only ones shadow photons leave).
-* **World**: a uniform environment of radiance = Background Color x Strength
+* **World**: Background <- Environment Texture (<- Mapping <- Texture Coordinate) or Sky
+  Texture: an image environment (``world_export.environment_of``); area lights with
+  Cycles' ``is_portal`` become its portals, not lights. Otherwise a uniform environment of
+  radiance = Background Color x Strength
   [W m^-2 sr^-1] (Mix/Add shaders of backgrounds are combined); a linked Color or Strength is
   reported and its default used; no world is black. A new World in Blender 5 is grey 0.05 and
   Cycles adds it, so it is kept.
