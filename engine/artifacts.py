@@ -234,6 +234,13 @@ def scene_parts(scene) -> dict:
         _feed_fields(h, light)
     h.update(b"world")
     _feed(h, np.asarray(scene.world.radiance, np.float64))
+    env = scene.world.environment
+    if env is not None:             # an image world: its pixels and how they are mapped
+        h.update(f"{env.projection}|{env.interpolation}|{env.encoding}".encode())
+        for arr in (env.pixels, env.strength, env.rotation):
+            _feed(h, np.ascontiguousarray(arr))
+    for portal in scene.world.portals:
+        _feed_fields(h, portal)
     parts["lights"] = h.hexdigest()
     h = hashlib.sha256()
     _feed_fields(h, scene.camera)

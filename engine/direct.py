@@ -66,9 +66,18 @@ def irradiance_from_terms(terms, count: int) -> np.ndarray:
     """Sum the ``direct_terms`` of ``count`` points into irradiance (count, 3)."""
     irradiance = np.zeros((count, 3))
     for target, scalar, rgb in terms:
+        rgb = np.asarray(rgb, np.float64)
+        if rgb.ndim == 2:                # a radiance per sample (an image world)
+            value = scalar[:, None] * rgb
+            if target is None:
+                irradiance += value
+            else:
+                for c in range(3):
+                    irradiance[:, c] += np.bincount(target, weights=value[:, c], minlength=count)
+            continue
         if target is not None:
             scalar = np.bincount(target, weights=scalar, minlength=count)
-        irradiance += scalar[:, None] * np.asarray(rgb, np.float64)[None]
+        irradiance += scalar[:, None] * rgb[None]
     return irradiance
 
 
@@ -77,7 +86,8 @@ def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.
                  offset_normals: np.ndarray | None = None, ray_log: list | None = None,
                  shadow_map=None, with_directions: bool = False) -> list:
     """Irradiance as a list of terms (target, scalar, rgb): term i adds ``scalar * rgb`` to
-    points ``target`` (None: every point, in order). Callers that weight the irradiance per
+    points ``target`` (None: every point, in order); ``rgb`` is a light's (3,) or, for an
+    image world (``lights.EnvironmentLight``), one radiance per sample (K, 3). Callers that weight the irradiance per
     point (albedo, pixel) can then do so on scalars instead of (N, 3) arrays.
     ``shadow_map``: a ``ShadowPhotonMap``; None traces every shadow ray (module docstring).
     ``with_directions``: terms are (target, scalar, rgb, directions, hittable) instead, with
@@ -122,7 +132,11 @@ def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.
             if len(sel) == 0:
                 continue
             pts = point_of[sel]
-            w, dist, weight = light.sample(x[pts], n[pts], u2[sel])
+            if getattr(light, "per_sample_rgb", False):
+                # An image world: each sample has its own radiance (lights.EnvironmentLight).
+                w, dist, weight, rgb = light.sample_rgb(x[pts], n[pts], u2[sel])
+            else:
+                (w, dist, weight), rgb = light.sample(x[pts], n[pts], u2[sel]), None
             weight = weight / (p_sel[sel] * k)
             live = (weight > 0) & np.isfinite(weight)
             if shadow_map is not None and shadow_map.covers(li):
@@ -133,7 +147,8 @@ def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.
             if tally is not None:
                 tally["plain"] += int(live.sum())
             if live.any():
-                groups.append((pts[live], w[live], dist[live], weight[live], light.rgb,
+                groups.append((pts[live], w[live], dist[live], weight[live],
+                               light.rgb if rgb is None else rgb[live],
                                getattr(light, 'in_bvh', False), _hittable(light)))
 
     if not groups:

@@ -230,6 +230,7 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
     sees_lights = None
     ray_lights = any(ray_visible(light) for light in context.lights.sampled)
     world = scene.world.radiance
+    image_world = scene.world.environment is not None     # radiance per direction
     if photon is not None and photon.lookups < spp:
         first_lookup = rng.integers(0, spp, pixels)
     # Emitter edges: their camera-seen emission is estimated apart (``edge_emission``).
@@ -264,8 +265,9 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
                 light.add(ray_of[d_rays], glint * throughput[d_rays], direct=depth == 1)
         all_hit = bool(hit.all())
         if not all_hit and not scene.world.is_black:
-            missed = np.broadcast_to(world, (int((~hit).sum()), 3)) if throughput is None \
-                else throughput[~hit] * world
+            seen_world = scene.world.radiance_towards(directions[~hit]) if image_world \
+                else np.broadcast_to(world, (int((~hit).sum()), 3))
+            missed = seen_world if throughput is None else throughput[~hit] * seen_world
             if depth == 0 and own_emission is not None:
                 missed = missed * own_emission[ray_of[~hit]][:, None]
 
@@ -494,8 +496,8 @@ def _seen_emission(scene, accel, surfaces, origins, directions, tmax, split=Fals
     _t, prim, bu, bv = accel.intersect(origins, directions, tmax)
     out = np.zeros((len(origins), 3))
     hit = prim >= 0
-    if not scene.world.is_black:
-        out[~hit] = scene.world.radiance
+    if not scene.world.is_black and not hit.all():
+        out[~hit] = scene.world.radiance_towards(directions[~hit])
     if hit.any():
         p = prim[hit]
         front = sampling.dot_rows(np.take(surfaces.geometric_normals, p, axis=0),
@@ -600,18 +602,24 @@ def _shade_direct(context, stats, rng, depth, idx, x, ns, ng, surface, thr, rays
         key += mat_d
         factor = None if diffuse_factor is None else diffuse_factor[idx]
         for target, scalar, rgb in terms:
-            keys = key if target is None else key[target]
-            if factor is None:
-                hist = np.bincount(keys, weights=scalar, minlength=len(direct_sums) * count)
-                value = hist.reshape(-1, count) @ (materials.diffuse_over_pi * rgb)
-            else:
-                # The share below the layers is RGB (a tinted coat): one histogram a channel.
+            if factor is not None:
+                # The share below the layers is RGB (a tinted coat): per channel.
                 part = factor if target is None else factor[target]
-                value = np.stack([np.bincount(keys, weights=scalar * part[:, c],
-                                              minlength=len(direct_sums) * count
-                                              ).reshape(-1, count)
-                                  @ (materials.diffuse_over_pi[:, c] * np.asarray(rgb, np.float64)[c])
+            where = key if target is None else key[target]
+            rgb = np.asarray(rgb, np.float64)
+            if rgb.ndim == 2 or factor is not None:
+                # A radiance per sample (an image world) or an RGB layer share: per channel.
+                rgb_c = rgb if rgb.ndim == 2 else np.broadcast_to(rgb, (len(scalar), 3))
+                weights = scalar[:, None] * rgb_c
+                if factor is not None:
+                    weights = weights * part
+                value = np.stack([np.bincount(where, weights=weights[:, c],
+                                              minlength=len(direct_sums) * count)
+                                  .reshape(-1, count) @ materials.diffuse_over_pi[:, c]
                                   for c in range(3)], axis=1)
+            else:
+                hist = np.bincount(where, weights=scalar, minlength=len(direct_sums) * count)
+                value = hist.reshape(-1, count) @ (materials.diffuse_over_pi * rgb)
             direct_sums += value
             if light is not None:
                 light.light[DIFFUSE, 0] += value
@@ -759,7 +767,8 @@ def _shade_glossy_direct(context, stats, rng, glossy, x, ns, ng, thr, rays, spp,
     for target, scalar, rgb, dirs, hittable in terms:
         target = everyone if target is None else target
         f = glossy.radiance(target, dirs, hittable)
-        contribution = f * (scalar[:, None] * np.asarray(rgb, np.float64)[None])
+        rgb = np.asarray(rgb, np.float64)
+        contribution = f * (scalar[:, None] * (rgb if rgb.ndim == 2 else rgb[None]))
         for c in range(3):
             radiance[:, c] += np.bincount(target, weights=contribution[:, c],
                                           minlength=len(idx))

@@ -9,7 +9,10 @@ What it computes
     * sampled lights, integrated by Monte Carlo: area lights (square, rectangle, disk,
       ellipse), emissive meshes (seed 3.3.3, 7.1.3), suns with an angular diameter, point and
       spot lights with a radius (``SphereLight``: Cycles 4.x/5.x sphere lights, or its facing
-      disk under Soft Falloff; radiance Phi / (4 pi^2 R^2)), and a constant world.
+      disk under Soft Falloff; radiance Phi / (4 pi^2 R^2)), a constant world (``WorldLight``), and an image world or a world with portals
+      (``EnvironmentLight``: a radiance per sample, ``sample_rgb``; a mixture of the image's
+      CDF, cosine directions and points on portals weighted by the mixture's density, whose
+      ``solid_angle_pdf(points, normals, wi)`` serves MIS).
     Each sampled light gives, for points x with normals n and uniform numbers u, a direction,
     a distance for the shadow ray and a scalar weight: the irradiance estimate before visibility
     is ``weight * light.rgb`` (L cos(theta_x) / pdf(omega) for emitters); plus a cheap unoccluded estimate of its contribution used to share the samples
@@ -636,6 +639,171 @@ class WorldLight:
         return w, np.full(len(x), np.inf), np.ones(len(x))
 
 
+ENV_CDF_SHARE = 0.75       # an image world's light samples drawn from its CDF (rest: cosine)
+PORTAL_SHARE = 0.5         # where portals face a point: samples through them
+
+
+class PortalSet:
+    """Light portals (Cycles' ``is_portal`` area lights; ``World.portals``): windows through
+    which an environment's light samples and photons go. Each portal: centre c, half axes
+    du, dv, unit normal n (its emitting side, into the room), area A, shape."""
+
+    def __init__(self, portals):
+        self.lights = list(portals)
+        self.centers = np.array([p.center for p in self.lights], np.float64).reshape(-1, 3)
+        self.du = np.array([p.axis_u for p in self.lights], np.float64).reshape(-1, 3)
+        self.dv = np.array([p.axis_v for p in self.lights], np.float64).reshape(-1, 3)
+        self.normals = np.array([p.normal for p in self.lights], np.float64).reshape(-1, 3)
+        self.areas = np.array([p.area for p in self.lights], np.float64)
+        self.round = np.array([p.shape in ("DISK", "ELLIPSE") for p in self.lights], bool)
+
+    def __len__(self):
+        return len(self.lights)
+
+    def sample_points(self, k: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Area-uniform points (N, 3) on portals ``k`` (N,) from numbers ``u`` (N, 2)."""
+        square = 2.0 * u - 1.0
+        disk = sampling.square_to_disk(u)
+        local = np.where(self.round[k][:, None], disk, square)
+        return self.centers[k] + local[:, 0:1] * self.du[k] + local[:, 1:2] * self.dv[k]
+
+    def weights(self, x: np.ndarray) -> np.ndarray:
+        """(N, P) unnormalised selection weights of the portals at points ``x``: their
+        approximate solid angle A cos / r^2 (capped at 2 pi) where x is on the room side, else 0."""
+        rel = x[:, None, :] - self.centers[None]                       # (N, P, 3)
+        height = np.einsum("npk,pk->np", rel, self.normals)
+        r2 = np.maximum(np.einsum("npk,npk->np", rel, rel), 1e-300)
+        cos = np.clip(height / np.sqrt(r2), 0.0, 1.0)
+        omega = np.minimum(self.areas[None] * np.maximum(cos, 0.05) / np.maximum(r2, self.areas[None]),
+                           2 * np.pi)
+        return np.where(height > 0, omega, 0.0)
+
+    def pdf(self, x: np.ndarray, w: np.ndarray, weights: np.ndarray) -> np.ndarray:
+        """Solid-angle density (N,) [1/sr] of directions ``w`` from ``x`` under portal
+        sampling with selection ``weights`` (N, P) (rows summing to 1 or 0): sum over the
+        portals the ray crosses of p_select r^2 / (A |cos|)."""
+        out = np.zeros(len(x))
+        for k in range(len(self)):
+            c, n = self.centers[k], self.normals[k]
+            denom = w @ n
+            t = ((c - x) @ n) / np.where(np.abs(denom) > 1e-12, denom, 1e-12)
+            q = x + t[:, None] * w - c
+            su = q @ self.du[k] / (self.du[k] @ self.du[k])
+            sv = q @ self.dv[k] / (self.dv[k] @ self.dv[k])
+            inside = (su * su + sv * sv <= 1.0) if self.round[k] else \
+                ((np.abs(su) <= 1.0) & (np.abs(sv) <= 1.0))
+            hit = inside & (t > 0) & (denom < 0) & (weights[:, k] > 0)
+            r2 = t * t
+            out += np.where(hit, weights[:, k] * r2 / np.maximum(np.abs(denom) * self.areas[k],
+                                                                 1e-300), 0.0)
+        return out
+
+
+class EnvironmentLight:
+    """The world as a sampled light when it is an image (``environment.Environment``) or has
+    portals. Each sample picks one of three strategies, and its weight is cos / p with p the
+    mixture of the three densities (one-sample MIS, balance heuristic: Veach 1997, 9.2.4):
+    * through a portal facing the point (share ``PORTAL_SHARE`` where one does): a portal by
+      its approximate solid angle, an area-uniform point on it;
+    * the image's CDF (``ENV_CDF_SHARE`` of the rest; a constant world: cosine instead);
+    * cosine directions about the normal (the rest), which keep sky light seen past an
+      occluder that takes the CDF's samples (under an overhang) low in noise.
+    A sample's radiance is the image's along its direction (``rgb`` per sample:
+    ``sample_rgb``)."""
+
+    kind = "world"
+    name = "World"
+    per_sample_rgb = True
+
+    def __init__(self, world):
+        self.environment = world.environment
+        self.constant = np.asarray(world.radiance, np.float64)
+        self.portals = PortalSet(world.portals)
+        self.rgb = np.ones(3)
+        self.cdf_share = ENV_CDF_SHARE if self.environment is not None else 0.0
+
+    def radiance(self, directions):
+        if self.environment is not None:
+            return self.environment.radiance(directions)
+        return np.broadcast_to(self.constant, (len(directions), 3)).copy()
+
+    def selection_weight(self, x, n):
+        return np.full(len(x), np.pi * (self.constant @ LUMINANCE))
+
+    def _portal_weights(self, x):
+        if not len(self.portals):
+            return np.zeros((len(x), 0)), np.zeros(len(x), bool)
+        w = self.portals.weights(x)
+        total = w.sum(axis=1)
+        faces = total > 0
+        return w / np.where(faces, total, 1.0)[:, None], faces
+
+    def solid_angle_pdf(self, points, normals, wi):
+        """Density (N,) [1/sr] of this light's samples at ``points`` with ``normals`` giving
+        directions ``wi`` (the mixture of ``sample_rgb``)."""
+        x = np.asarray(points, np.float64).reshape(-1, 3)
+        n = np.asarray(normals, np.float64).reshape(-1, 3)
+        w = np.asarray(wi, np.float64).reshape(-1, 3)
+        cos_pdf = np.maximum(_dot(n, w), 0.0) / np.pi
+        env_pdf = self.environment.direction_pdf(w) if self.environment is not None else 0.0
+        rest = self.cdf_share * env_pdf + (1.0 - self.cdf_share) * cos_pdf
+        sel, faces = self._portal_weights(x)
+        if not faces.any():
+            return rest
+        portal_pdf = self.portals.pdf(x, w, sel)
+        return np.where(faces, PORTAL_SHARE * portal_pdf + (1 - PORTAL_SHARE) * rest, rest)
+
+    def sample_rgb(self, x, n, u):
+        """Directions, shadow distances (inf), scalar weights cos / p and radiance (N, 3)."""
+        count = len(x)
+        x = np.asarray(x, np.float64)
+        n64 = np.asarray(n, np.float64)
+        w = np.empty((count, 3))
+        pick = u[:, 0].copy()
+        sel, faces = self._portal_weights(x)
+        portal = faces & (pick < PORTAL_SHARE)
+        pick = np.where(faces, np.where(portal, pick / PORTAL_SHARE,
+                                        (pick - PORTAL_SHARE) / (1 - PORTAL_SHARE)), pick)
+        pick = np.clip(pick, 0.0, 1.0 - 1e-12)
+        env = ~portal & (pick < self.cdf_share)
+        cos = ~portal & ~env
+        if portal.any():
+            idx = np.flatnonzero(portal)
+            cdf = np.cumsum(sel[idx], axis=1)
+            k = np.minimum((cdf < pick[idx, None]).sum(axis=1), len(self.portals) - 1)
+            rows = np.arange(len(idx))
+            lower = np.where(k > 0, cdf[rows, np.maximum(k - 1, 0)], 0.0)
+            share = sel[idx, k]
+            u0 = np.clip((pick[idx] - lower) / np.where(share > 0, share, 1.0), 0.0, 1.0 - 1e-12)
+            p = self.portals.sample_points(k, np.stack([u0, u[idx, 1]], 1))
+            d = p - x[idx]
+            w[idx] = d / np.maximum(np.linalg.norm(d, axis=1), 1e-300)[:, None]
+        if env.any():
+            idx = np.flatnonzero(env)
+            uu = np.stack([pick[idx] / self.cdf_share, u[idx, 1]], 1)
+            w[idx] = self.environment.sample(np.clip(uu, 0.0, 1.0 - 1e-12))[0]
+        if cos.any():
+            idx = np.flatnonzero(cos)
+            lo = self.cdf_share
+            uu = np.stack([np.clip((pick[idx] - lo) / (1.0 - lo), 0.0, 1.0 - 1e-12), u[idx, 1]], 1)
+            t, b = sampling.orthonormal_basis(n64[idx])
+            w[idx] = sampling.to_world(sampling.square_to_cosine_hemisphere(uu), t, b, n64[idx])
+        pdf = self.solid_angle_pdf(x, n64, w)
+        cos_x = np.maximum(_dot(n64, w), 0.0)
+        ok = (pdf > 0) & (cos_x > 0)
+        weight = np.where(ok, cos_x / np.where(ok, pdf, 1.0), 0.0)
+        rgb = np.zeros((count, 3))
+        if ok.any():
+            rgb[ok] = self.radiance(w[ok])
+        return w, np.full(count, np.inf), weight, rgb
+
+    def sample(self, x, n, u):
+        """As the other lights: (directions, distances, weight) with the radiance's luminance
+        folded into the weight (``rgb`` is white); ``sample_rgb`` keeps the colour."""
+        w, dist, weight, rgb = self.sample_rgb(x, n, u)
+        return w, dist, weight * (rgb @ LUMINANCE)
+
+
 # The light set ------------------------------------------------------------------------------
 class LightSet:
     """All lights of a scene, split into exactly evaluated (delta) and sampled lights."""
@@ -697,7 +865,10 @@ class LightSet:
         else:
             self.emissive_triangles = np.zeros(0, bool)
         if not scene.world.is_black:
-            self.sampled.append(WorldLight(scene.world.radiance))
+            if scene.world.environment is None and not scene.world.portals:
+                self.sampled.append(WorldLight(scene.world.radiance))
+            else:
+                self.sampled.append(EnvironmentLight(scene.world))
 
     @property
     def delta_count(self) -> int:

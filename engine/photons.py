@@ -12,8 +12,13 @@ What it computes (seed sections 9.1-9.5, corrections in DESIGN.md §4)
         sun (a disk covering the scene's bounds), area lights (area-uniform points, cosine
         directions, Eq. 9.5; collimated ones along the normal, 9.1.2), emissive meshes
         (triangle by area with ``searchsorted`` on cumulative areas, the seed's "area line",
-        area-uniform points, cosine directions, 9.1.3) and a constant world (a uniform
-        direction and a point on a disk covering the scene).
+        area-uniform points, cosine directions, 9.1.3) and the world: a constant one (a
+        uniform direction and a point on a disk covering the scene), an image world
+        (``environment.Environment``: directions from its CDF, power L / p x the disk's area
+        / n, pbrt-v3 ``InfiniteAreaLight::Sample_Le``), or, with light portals, through them
+        (``_portal_photons``: a point on a portal, a direction into the room from the mixture
+        of the CDF and cosine, power L cos A / (p n); photons whose way out to the sky is
+        blocked are dropped, which needs ``emit_photons``'s ``accel``).
     ``trace_photons(scene, accel, emitted, rng)``  all photons advance together through
         Embree; at each hit Russian roulette (9.2) with Pd, Ps the largest channels of the
         reflectances (``roulette_probabilities``) chooses diffuse / specular / absorb and
@@ -52,7 +57,7 @@ import numpy as np
 
 from . import sampling
 from .accel import offset_distance
-from .lights import LUMINANCE, sphere_emission_origins, spot_mask
+from .lights import ENV_CDF_SHARE, LUMINANCE, PortalSet, sphere_emission_origins, spot_mask
 from .npzjson import pack_json, unpack_json
 from .scene import MAX_COORDINATE, MAX_VALUE, AreaLight, PointLight, Scene, SpotLight, SunLight
 from .bsdf import MaterialTable, sample_glossy
@@ -155,14 +160,53 @@ def _light_fluxes(scene: Scene):
             # mean exitance), each photon then carries the exitance at its own point.
             picks = areas * sides * (surface.exitance @ LUMINANCE)
             out.append(("emissive meshes", flux, ("mesh", emissive, picks, mids)))
-    if not scene.world.is_black:
-        out.append(("World", scene.world.radiance * 4 * np.pi ** 2 * radius ** 2,
-                    ("world", center, radius)))
+    world = scene.world
+    if not world.is_black and world.portals:
+        # Through the portals: the flux crossing them, A int L(w) cos dw per portal.
+        portals = PortalSet(world.portals)
+        cos_weighted = _cosine_weighted_radiance(world, portals)
+        flux = (portals.areas[:, None] * cos_weighted).sum(axis=0)
+        out.append(("World", flux, ("portal", world, portals)))
+    elif not world.is_black:
+        total = (world.environment.integral() if world.environment is not None
+                 else world.radiance * 4 * np.pi)
+        out.append(("World", total * np.pi * radius ** 2, ("world", center, radius)))
     return out
 
 
-def emit_photons(scene: Scene, count: int, rng: np.random.Generator) -> EmittedPhotons:
-    """``count`` photons shared among the lights in proportion to their flux."""
+def _cosine_weighted_radiance(world, portals) -> np.ndarray:
+    """(P, 3): for each portal, the radiance entering it integrated against the cosine with
+    its normal over its outer hemisphere [W/m^2] (a 64 x 128 midpoint grid in (cos, phi))."""
+    mu = (np.arange(64) + 0.5) / 64
+    phi = 2 * np.pi * (np.arange(128) + 0.5) / 128
+    mm, pp = np.meshgrid(mu, phi, indexing="ij")
+    s = np.sqrt(1 - mm ** 2)
+    local = np.stack([s * np.cos(pp), s * np.sin(pp), mm], -1).reshape(-1, 3)
+    out = []
+    for k in range(len(portals)):
+        n = portals.normals[k][None]
+        t, b = sampling.orthonormal_basis(n)
+        travel = local[:, 0:1] * t + local[:, 1:2] * b + local[:, 2:3] * n
+        radiance = world.radiance_towards(-travel)        # seen from inside, looking out
+        out.append((radiance * mm.reshape(-1, 1)).sum(axis=0) * (2 * np.pi / mm.size))
+    return np.array(out).reshape(-1, 3)
+
+
+def _environment_photons(world, u, v, n):
+    """Directions of travel (n, 3) and powers per unit disc area x n [W/m^2] (n, 3) of photons
+    from an image world: sky directions from its CDF (``environment.Environment.sample``),
+    power L / p (pbrt-v3 ``InfiniteAreaLight::Sample_Le``)."""
+    wi, radiance, pdf = world.environment.sample(u)
+    ok = pdf > 0
+    power = np.where(ok[:, None], radiance / np.where(ok, pdf, 1.0)[:, None], 0.0)
+    return -wi, power
+
+
+def emit_photons(scene: Scene, count: int, rng: np.random.Generator,
+                 accel=None) -> EmittedPhotons:
+    """``count`` photons shared among the lights in proportion to their flux. ``accel``:
+    the scene's ``Accelerator``, which photons through light portals need (a photon whose
+    way out to the sky is blocked carries nothing)."""
     lights = [entry for entry in _light_fluxes(scene) if np.any(entry[1] > 0)
               and getattr(entry[2][1], "photon_share", 1.0) > 0]
     if not lights or count <= 0:
@@ -234,12 +278,21 @@ def emit_photons(scene: Scene, count: int, rng: np.random.Generator) -> EmittedP
             m = surface.exitance
             picked = table.exitance[scene.material_ids[prim]] @ LUMINANCE
             power = m / np.maximum(picked[:, None], 1e-30) * (flux @ LUMINANCE) / n
-        else:  # world
+        elif kind == "world":
             center, radius = spec[1], spec[2]
-            d = -sampling.square_to_sphere(u)                 # travelling inwards
+            if scene.world.environment is not None:
+                # Directions from the image's CDF, power L / p over the disc's area.
+                d, per_area = _environment_photons(scene.world, u, v, n)
+                power = per_area * (np.pi * radius ** 2 / n)
+            else:
+                d = -sampling.square_to_sphere(u)                 # travelling inwards
             t, b = sampling.orthonormal_basis(d)
             disk = sampling.square_to_disk(v) * radius
             o = center - d * (2 * radius) + disk[:, 0:1] * t + disk[:, 1:2] * b
+        else:  # the world through its portals
+            o, d, power = _portal_photons(scene, spec[1], spec[2], u, v, n, accel)
+            keep = np.flatnonzero(power.max(axis=1) > 0)      # those that saw the sky
+            o, d, power, n = o[keep], d[keep], power[keep], len(keep)
         soft = kind in ("point", "spot") and spec[1].radius > 0 and \
             getattr(spec[1], "soft_falloff", False)
         centers.append(np.broadcast_to(spec[1].position if soft else np.zeros(3), (n, 3)))
@@ -260,6 +313,50 @@ def emit_photons(scene: Scene, count: int, rng: np.random.Generator) -> EmittedP
                           np.concatenate(powers), per_light,
                           falloff_center=np.concatenate(centers) if soft else None,
                           falloff_r2=r2 if soft else None)
+
+
+def _portal_photons(scene, world, portals, u, v, n, accel):
+    """Photons of the world entering through light portals: a portal by area, an
+    area-uniform point on it, a direction into the room from the mixture of the image's CDF
+    (``ENV_CDF_SHARE``; none for a constant world) and cosine about its normal; power
+    L(w) cos A / (p n). A photon whose ray back out to the sky meets geometry (``accel``)
+    carries nothing. Returns origins, directions of travel and powers (n, 3)."""
+    cdf = np.cumsum(portals.areas) / portals.areas.sum()
+    k = np.minimum(np.searchsorted(cdf, u[:, 0], side="right"), len(portals) - 1)
+    lower = np.where(k > 0, cdf[np.maximum(k - 1, 0)], 0.0)
+    u0 = np.clip((u[:, 0] - lower) / (cdf[k] - lower), 0.0, 1.0 - 1e-12)
+    points = portals.sample_points(k, np.stack([u0, u[:, 1]], 1))
+    normal = portals.normals[k]
+    share = ENV_CDF_SHARE if world.environment is not None else 0.0
+    from_cdf = v[:, 0] < share
+    travel = np.empty((n, 3))
+    if from_cdf.any():
+        uu = np.stack([v[from_cdf, 0] / share, v[from_cdf, 1]], 1)
+        travel[from_cdf] = -world.environment.sample(np.clip(uu, 0.0, 1.0 - 1e-12))[0]
+    rest = ~from_cdf
+    if rest.any():
+        uu = np.stack([np.clip((v[rest, 0] - share) / (1.0 - share), 0.0, 1.0 - 1e-12),
+                       v[rest, 1]], 1)
+        travel[rest] = _cosine_directions(np.ascontiguousarray(normal[rest]), uu)
+    cos = np.einsum("ij,ij->i", travel, normal)
+    pdf = (1.0 - share) * np.maximum(cos, 0.0) / np.pi
+    if world.environment is not None:
+        pdf = pdf + share * world.environment.direction_pdf(-travel)
+    ok = (cos > 0) & (pdf > 0)
+    radiance = np.zeros((n, 3))
+    if ok.any():
+        radiance[ok] = world.radiance_towards(-travel[ok])
+    power = radiance * np.where(ok, cos * portals.areas.sum() / np.where(ok, pdf, 1.0) / n,
+                                0.0)[:, None]
+    eps = offset_distance(points, scene.extent)[:, None]
+    if accel is not None and ok.any():
+        # The way out: from the portal towards the sky; blocked photons carry nothing.
+        idx = np.flatnonzero(ok)
+        start = np.ascontiguousarray(points[idx] - travel[idx] * eps[idx], np.float32)
+        blocked = accel.occluded(start, np.ascontiguousarray(-travel[idx], np.float32),
+                                 np.full(len(idx), 1e37, np.float32))
+        power[idx[blocked]] = 0.0
+    return points + travel * eps, travel, power
 
 
 ESTIMATE_CHUNK = 8192           # queries per kd-tree call in PhotonMap.irradiance
@@ -749,7 +846,7 @@ def build_photon_map(scene: Scene, accel, count: int, seed: int = 0, max_bounces
     from concurrent.futures import ThreadPoolExecutor
 
     t0 = time.perf_counter()
-    emitted = emit_photons(scene, count, sampling.rng_for(seed, sampling.STREAM_PHOTON, 0))
+    emitted = emit_photons(scene, count, sampling.rng_for(seed, sampling.STREAM_PHOTON, 0), accel)
     emit_seconds = time.perf_counter() - t0
     n = len(emitted.origins)
     bounds = [(a, min(a + PHOTON_CHUNK, n)) for a in range(0, n, PHOTON_CHUNK)]
@@ -843,7 +940,7 @@ def specular_share(scene: Scene, accel, seed: int = 0, count: int = CAUSTIC_PILO
     surfaces = surfaces or SceneSurfaces(scene)
     if not surfaces.materials.has_transport_specular:
         return 0.0, 0.0
-    emitted = emit_photons(scene, count, sampling.rng_for(seed, sampling.STREAM_CAUSTIC, 0))
+    emitted = emit_photons(scene, count, sampling.rng_for(seed, sampling.STREAM_CAUSTIC, 0), accel)
     if len(emitted.origins) == 0:
         return 0.0, 0.0
     _t, prim, bu, bv = accel.intersect(np.ascontiguousarray(emitted.origins, np.float32),
@@ -888,7 +985,7 @@ def build_caustic_map(scene: Scene, accel, emitted_count: int, seed: int = 0,
 
     def trace(i):
         rng = sampling.rng_for(seed, sampling.STREAM_CAUSTIC, i + 1)
-        emitted = emit_photons(scene, size, rng)
+        emitted = emit_photons(scene, size, rng, accel)
         emitted.power /= chunks
         return trace_photons(scene, accel, emitted, rng, max_bounces=max_bounces,
                              surfaces=surfaces, caustic=True)

@@ -291,16 +291,34 @@ class AreaLight:
 
 @dataclass
 class World:
-    """A constant environment of radiance ``radiance`` [W m^-2 sr^-1] from every direction."""
+    """The environment: a constant radiance ``radiance`` [W m^-2 sr^-1] from every direction,
+    or, where ``environment`` is set (an ``engine.environment.Environment``: an HDRI or a baked
+    sky), that image's radiance per direction; ``radiance`` is then its mean over the sphere
+    (for estimates and reports). ``portals``: Cycles' light portals (area lights marked
+    ``is_portal``, emitting side into the room), windows through which the environment's
+    photons and light samples go; they are not lights."""
 
     radiance: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    environment: object = None
+    portals: list = field(default_factory=list)
 
     def __post_init__(self):
+        if self.environment is not None:
+            self.radiance = self.environment.mean_radiance()
         self.radiance = _rgb(self.radiance, "World", "colour")
 
     @property
     def is_black(self) -> bool:
+        if self.environment is not None:
+            return bool(self.environment.black) or not bool(np.any(self.radiance > 0))
         return not bool(np.any(self.radiance > 0))
+
+    def radiance_towards(self, directions: np.ndarray) -> np.ndarray:
+        """Radiance (N, 3) arriving from unit ``directions`` (N, 3): the image's, or the
+        constant colour broadcast."""
+        if self.environment is not None:
+            return self.environment.radiance(directions)
+        return np.broadcast_to(self.radiance, (len(directions), 3))
 
 
 @dataclass

@@ -759,11 +759,23 @@ def test_world_colour():
     bg.inputs["Color"].default_value = (0.2, 0.4, 0.6, 1.0)
     bg.inputs["Strength"].default_value = 2.0
     np.testing.assert_allclose(export().world.radiance, [0.4, 0.8, 1.2], rtol=1e-6)
+    # A Sky Texture is Blender's sky baked by Cycles into an image world (issue 24); the
+    # Background's Strength scales it (the second export reads the cached bake).
     sky = world.node_tree.nodes.new("ShaderNodeTexSky")
     world.node_tree.links.new(sky.outputs[0], bg.inputs["Color"])
     s = export()
-    np.testing.assert_allclose(s.world.radiance, [0.4, 0.8, 1.2], rtol=1e-6)
-    assert sum("World 'World'" in w and "Sky Texture" in w for w in s.warnings) == 1
+    assert s.world.environment is not None and not s.warnings, s.warnings
+    assert np.all(s.world.radiance > 0)
+    bg.inputs["Strength"].default_value = 1.0
+    np.testing.assert_allclose(export().world.radiance, s.world.radiance / 2, rtol=1e-6)
+    # Anything else on the colour: the flat colour, with a warning naming world and node.
+    gamma = world.node_tree.nodes.new("ShaderNodeGamma")
+    world.node_tree.links.new(sky.outputs[0], gamma.inputs["Color"])
+    world.node_tree.links.new(gamma.outputs[0], bg.inputs["Color"])
+    s = export()
+    assert s.world.environment is None
+    np.testing.assert_allclose(s.world.radiance, [0.2, 0.4, 0.6], rtol=1e-6)
+    assert sum("World 'World'" in w and "Gamma" in w for w in s.warnings) == 1
 
 
 # ---------------------------------------------------------------------------------------------

@@ -75,7 +75,10 @@ animation already applied by Blender) and turns it into the renderer's inert sce
   - Zero power is skipped silently; negative power is skipped with a warning.
   - ``Light.lanterna``: ``photon_share`` goes onto every light; ``shadow_photons`` onto area
     lights (the only ones shadow photons leave).
-* **World**: a uniform environment of radiance = Background Color x Strength
+* **World**: Background <- Environment Texture (<- Mapping <- Texture Coordinate) or Sky
+  Texture: an image environment (``world_export.environment_of``); area lights with
+  Cycles' ``is_portal`` become its portals, not lights. Otherwise a uniform environment of
+  radiance = Background Color x Strength
   [W m^-2 sr^-1] (Mix/Add shaders of backgrounds are combined); a linked Color or Strength is
   reported and its default used; no world is black. A new World in Blender 5 is grey 0.05 and
   Cycles adds it, so it is kept.
@@ -128,6 +131,7 @@ from ..settings import RenderSettings
 from . import compat
 from .. import nodes
 from .. import textures
+from .world_export import environment_of
 from ..shaders import CLOSURE_KINDS, Closure, seed_reduction
 from .node_export import export_graph
 from ..scene import (AREA_SHAPES, AreaLight, Camera, Material, PointLight, Scene, SceneError,
@@ -901,10 +905,14 @@ def _world_radiance(reader: _NodeReader, src, depth: int = 0) -> np.ndarray:
     return np.zeros(3)
 
 
-def _export_world(world, warn: _Warnings) -> World:
+def _export_world(world, warn: _Warnings, portals=()) -> World:
     if world is None:
-        return World()
+        return World(portals=list(portals))
     tree = world.node_tree
+    if compat.uses_nodes(world):
+        environment = environment_of(world, warn)
+        if environment is not None:
+            return World(environment=environment, portals=list(portals))
     if not compat.uses_nodes(world):
         radiance = np.array(world.color[:3], float)
     else:
@@ -916,7 +924,7 @@ def _export_world(world, warn: _Warnings) -> World:
         raise SceneError(f"World '{world.name}': colour {_fmt(radiance)} is not finite")
     if np.any(radiance < 0):
         warn(f"World '{world.name}': negative colour {_fmt(radiance)} clipped to 0")
-    return World(radiance=np.maximum(radiance, 0.0))
+    return World(radiance=np.maximum(radiance, 0.0), portals=list(portals))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1057,6 +1065,7 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
     mesh_cache: dict = {}
     groups: dict = {}        # (object, mesh) -> _Group of instances
     lights = []
+    portals = []           # Cycles light portals: windows of the world, not lights
 
     mesh_parents: set = set()    # objects whose geometry arrived as MESH instances
     curve_like = []              # non-mesh geometry objects, converted if no mesh arrived
@@ -1092,7 +1101,17 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
             name = f"{parent.name}/{obj.name}"
         matrix = np.array(inst.matrix_world, np.float64)
 
-        if otype == "LIGHT":
+        if otype == "LIGHT" and obj.data.type == "AREA" and \
+                getattr(getattr(obj.data, "cycles", None), "is_portal", False):
+            # A light portal (Cycles): a window for the world's light, not a light.
+            data = obj.data
+            shape = data.shape if data.shape in AREA_SHAPES else "SQUARE"
+            size_y = float(data.size_y) if shape in ("RECTANGLE", "ELLIPSE") else float(data.size)
+            if np.all(np.isfinite(matrix)):
+                portals.append(AreaLight(name, shape=shape, matrix=matrix,
+                                         size_x=float(data.size), size_y=size_y,
+                                         power=np.zeros(3)))
+        elif otype == "LIGHT":
             light = _convert_light(name, obj.data, matrix, warn)
             if light is not None:
                 settings = getattr(obj.data, "lanterna", None)
@@ -1194,7 +1213,7 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
                 _corner_attribute(group.data, key)
         start += n * n_tri
 
-    world = _export_world(scene_eval.world, warn)
+    world = _export_world(scene_eval.world, warn, portals)
     out = Scene(triangles=triangles, material_ids=material_ids, materials=materials,
                 camera=camera, shading_normals=normals, object_ids=object_ids,
                 object_names=object_names, lights=lights, world=world,

@@ -1,0 +1,186 @@
+"""Image worlds (issue 24): ``engine/environment.py`` and the world read through it (no bpy;
+about 20 s).
+
+* the importance sampler's density integrates to 1 over the sphere (midpoint quadrature on
+  sub-cells of the sampling grid: exact up to rounding, 1e-9), under a Mapping rotation;
+* ``sample``'s directions against ``solid_angle_pdf``: chi-square over 16 x 32 equal-area
+  bins of 200k samples (bins expecting < 5 merged), p > 1e-4;
+* a plane under an environment of a small bright patch ("sun", Closest interpolation, so the
+  patch is exactly its cells) and a dim sky: the direct light's irradiance against the
+  analytic integral of L cos over the cells, within 4 standard errors measured from the
+  samples themselves;
+* photons from the environment on an open plane: the photon map's irradiance against the
+  same integral, within 4 standard errors measured over 9 points (spread of the estimates);
+* a constant image renders as the uniform world does (the mean of 3 seeds within 4 standard
+  errors of the difference, measured from the seeds' spread).
+
+Checked to fail (each by editing the module, running this file, then restoring it):
+the sin(theta) factor dropped from the density: all 5 tests fail; ``sample`` drawing uniform
+(u, v) while its density stays the CDF's: 4 fail (all but the integral); photon power L
+instead of L / p: the photon test fails.
+"""
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from lanterna.engine.accel import Accelerator
+from lanterna.engine.direct import direct_irradiance
+from lanterna.engine.environment import (Environment, equirectangular_to_direction,
+                                         euler_rotation)
+from lanterna.engine.lights import LightSet
+from lanterna.engine.photons import build_photon_map
+from lanterna.engine.pipeline import RenderSettings, render
+from lanterna.engine.scene import Camera, Material, Scene, World
+
+from analytic import quad
+
+SUN_ROWS, SUN_COLS = (44, 47), (20, 23)       # the patch's texels in a 64 x 128 image
+SUN_L = np.array([900.0, 800.0, 700.0])
+SKY_L = np.array([0.2, 0.3, 0.5])
+
+
+def _sun_image():
+    img = np.zeros((64, 128, 3), np.float32)
+    img[32:] = SKY_L                       # upper hemisphere (rows 32-63: v > 1/2)
+    img[SUN_ROWS[0]:SUN_ROWS[1], SUN_COLS[0]:SUN_COLS[1]] = SUN_L
+    return img
+
+
+def _analytic_up_irradiance(img):
+    """E on an upward plane of a Closest-interpolated image: per cell L x dphi x
+    (sin^2 theta1 - sin^2 theta0) / 2 over the upper hemisphere (theta from the zenith)."""
+    h, w = img.shape[:2]
+    e = np.zeros(3)
+    for j in range(h // 2, h):
+        t_hi = np.pi * (1 - j / h)              # the row's bottom edge (v = j / h)
+        t_lo = np.pi * (1 - (j + 1) / h)
+        band = 0.5 * (np.sin(t_hi) ** 2 - np.sin(t_lo) ** 2)
+        e += img[j].sum(axis=0) * (2 * np.pi / w) * band
+    return e
+
+
+def _plane_scene(world, size=40.0, resolution=(16, 16)):
+    tris = quad([0, 0, 0], [size / 2, 0, 0], [0, size / 2, 0])
+    cam = Camera.look_at([0, 0, 2.0], [0, 0, 0], up=(0, 1, 0), fov_x_deg=40,
+                         resolution=resolution)
+    return Scene(triangles=tris, material_ids=np.zeros(len(tris), np.int32),
+                 materials=[Material("grey", diffuse=0.5)], camera=cam, world=world).validate()
+
+
+def test_pdf_integrates_to_one_over_the_sphere():
+    rng = np.random.default_rng(3)
+    img = (rng.random((32, 64, 3)) ** 4).astype(np.float32)
+    img[20:22, 10:12] = 500.0
+    env = Environment(img, rotation=euler_rotation(np.radians([10.0, -20.0, 35.0])))
+    h, w = env.grid
+    sub = 6
+    v = (np.arange(h * sub) + 0.5) / (h * sub)
+    u = (np.arange(w * sub) + 0.5) / (w * sub)
+    vv, uu = np.meshgrid(v, u, indexing="ij")
+    d_tex = equirectangular_to_direction(uu.ravel(), vv.ravel())
+    d_world = d_tex @ env.rotation              # texture -> world
+    d_omega = (2 * np.pi / (w * sub)) * (np.pi / (h * sub)) * np.sin(np.pi * (1 - vv.ravel()))
+    total = float((env.solid_angle_pdf(None, None, d_world) * d_omega).sum())
+    # The midpoint rule is exact for p(u, v) constant per cell; sin(theta) cancels except for
+    # the midpoint's own sin against the sub-cell's exact solid angle (< 1e-3 at 6 x 6).
+    assert abs(total - 1.0) < 2e-3, total
+
+
+def test_samples_follow_the_pdf_chi_square():
+    rng = np.random.default_rng(5)
+    img = (rng.random((32, 64, 3)) ** 3).astype(np.float32)
+    img[24:26, 40:42] = 300.0
+    env = Environment(img, rotation=euler_rotation(np.radians([0.0, 15.0, 50.0])))
+    n = 200_000
+    wi, radiance, pdf = env.sample(rng.random((n, 2)))
+    np.testing.assert_allclose(np.linalg.norm(wi, axis=1), 1.0, atol=1e-9)
+    np.testing.assert_allclose(pdf, env.solid_angle_pdf(None, None, wi), rtol=1e-9)
+    np.testing.assert_allclose(radiance, env.radiance(wi), rtol=1e-12)
+    # Equal-area bins in world (z, phi), 16 x 32; expected counts by quadrature of the pdf.
+    nz, nphi = 16, 32
+
+    def bin_of(d):
+        iz = np.clip(((d[:, 2] + 1) / 2 * nz).astype(int), 0, nz - 1)
+        iphi = np.clip(((np.arctan2(d[:, 1], d[:, 0]) + np.pi) / (2 * np.pi) * nphi)
+                       .astype(int), 0, nphi - 1)
+        return iz * nphi + iphi
+
+    observed = np.bincount(bin_of(wi), minlength=nz * nphi)
+    zq = (np.arange(64 * nz) + 0.5) / (64 * nz) * 2 - 1      # 64 x 16 points per bin
+    pq = (np.arange(16 * nphi) + 0.5) / (16 * nphi) * 2 * np.pi - np.pi
+    zz, pp = np.meshgrid(zq, pq, indexing="ij")
+    s = np.sqrt(1 - zz.ravel() ** 2)
+    dq = np.stack([s * np.cos(pp.ravel()), s * np.sin(pp.ravel()), zz.ravel()], 1)
+    weight = env.solid_angle_pdf(None, None, dq) * (4 * np.pi / len(dq))
+    expected = np.bincount(bin_of(dq), weights=weight, minlength=nz * nphi) * n
+    expected *= n / expected.sum()
+    keep = expected >= 5
+    obs = np.append(observed[keep], observed[~keep].sum())
+    exp = np.append(expected[keep], expected[~keep].sum())
+    stat = float(((obs - exp) ** 2 / np.maximum(exp, 1e-9)).sum())
+    p_value = chi2.sf(stat, len(obs) - 1)
+    assert p_value > 1e-4, (stat, len(obs), p_value)
+
+
+def test_direct_light_of_a_sun_patch_matches_the_analytic_irradiance():
+    img = _sun_image()
+    env = Environment(img, interpolation="Closest")
+    scene = _plane_scene(World(environment=env))
+    lights = LightSet(scene)
+    accel = Accelerator(scene.triangles)
+    count = 40_000
+    x = np.tile([[0.0, 0.0, 0.0]], (count, 1))
+    n = np.tile([[0.0, 0.0, 1.0]], (count, 1))
+    e = direct_irradiance(x, n, lights, accel, np.random.default_rng(7), light_samples=4)
+    expected = _analytic_up_irradiance(img)
+    se = e.std(axis=0) / np.sqrt(count)
+    assert np.all(np.abs(e.mean(axis=0) - expected) < 4 * se + 1e-9 * expected), \
+        (e.mean(axis=0), expected, se)
+
+
+def test_photons_from_the_environment_light_an_open_plane():
+    img = _sun_image()
+    env = Environment(img, interpolation="Closest")
+    scene = _plane_scene(World(environment=env))
+    accel = Accelerator(scene.triangles)
+    pm = build_photon_map(scene, accel, 300_000, seed=2)
+    q = np.array([[x, y, 0.0] for x in (-4.0, 0.0, 4.0) for y in (-4.0, 0.0, 4.0)])
+    e = pm.irradiance(q, np.tile([[0.0, 0.0, 1.0]], (len(q), 1)), k=600, max_radius=4.0)
+    expected = _analytic_up_irradiance(img)
+    se = e.std(axis=0, ddof=1) / np.sqrt(len(q))
+    assert np.all(np.abs(e.mean(axis=0) - expected) < 4 * se), (e.mean(axis=0), expected, se)
+    assert np.all(np.abs(e.mean(axis=0) / expected - 1) < 0.1)
+
+
+def _box_yard(world):
+    """A plane with a box on it (sky shadow), camera looking down at both."""
+    tris = [quad([0, 0, 0], [5, 0, 0], [0, 5, 0])]
+    c, h = np.array([0.5, 0.3, 0.5]), 0.5
+    for axis in range(3):
+        for sign in (-1, 1):
+            centre = c.copy()
+            centre[axis] += sign * h
+            du, dv = np.zeros(3), np.zeros(3)
+            du[(axis + 1) % 3], dv[(axis + 2) % 3] = h, h
+            tris.append(quad(centre, du, dv))
+    tris = np.concatenate(tris)
+    cam = Camera.look_at([2.5, -2.5, 3.0], [0.3, 0.3, 0.2], up=(0, 0, 1), fov_x_deg=50,
+                         resolution=(24, 24))
+    return Scene(triangles=tris, material_ids=np.zeros(len(tris), np.int32),
+                 materials=[Material("grey", diffuse=0.6)], camera=cam, world=world).validate()
+
+
+def test_constant_image_renders_like_the_uniform_world():
+    colour = np.array([0.6, 0.5, 0.4])
+    flat = _box_yard(World(radiance=colour))
+    image = _box_yard(World(environment=Environment(np.broadcast_to(colour, (8, 16, 3)))))
+    np.testing.assert_allclose(image.world.radiance, colour, rtol=1e-6)
+    settings = dict(preset="preview", samples=4, photons=20_000)
+    a = [np.asarray(render(flat, RenderSettings(seed=s, **settings)).image, float).mean()
+         for s in (1, 2, 3)]
+    b = [np.asarray(render(image, RenderSettings(seed=s, **settings)).image, float).mean()
+         for s in (1, 2, 3)]
+    se = np.sqrt(np.var(a, ddof=1) / 3 + np.var(b, ddof=1) / 3)
+    assert abs(np.mean(a) - np.mean(b)) < 4 * se + 1e-3 * np.mean(a), (a, b)
+    # the flat world keeps its own light (cosine samples), bit for bit as before
+    assert LightSet(flat).describe()["sampled"] == ["world:World"]

@@ -1,0 +1,54 @@
+"""HDRI-world parity with Cycles (issue 24): Lanterna's ``final`` preset against the Cycles
+reference of ``tests/data/make_world_refs.py`` (scenes: ``tests/world_scenes.py``), 4 x 4
+region means of luminance, bright regions (over a tenth of the brightest) within the issue's
+bound of 2 %.
+
+Measured (``final``; worst bright region; the whole image's ratio), reference 4 x 512 spp,
+worst region relative SE 0.028 %:
+
+=======  =====  ==================  ==================  ==================
+scene    bound  seed 1              seed 2              seed 3
+=======  =====  ==================  ==================  ==================
+yard     2 %    0.75 % (0.9985)     1.20 % (0.9987)     0.71 % (0.9970)
+=======  =====  ==================  ==================  ==================
+
+Before issue 24 the same world exported as a flat colour (its Background Color, the image
+ignored): the issue measured such an exterior at 0.03 x Cycles' mean.
+"""
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+import world_scenes  # noqa: E402
+from test_parity_cycles import block_means  # noqa: E402
+
+REF_DIR = HERE / "data" / "cycles_world"
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+
+def worst_bright_region(name, seed=1):
+    from lanterna.engine.blender.export import export_scene
+    from lanterna.engine.pipeline import RenderSettings, render
+
+    world_scenes.build(name)
+    scene = export_scene(bpy.context.evaluated_depsgraph_get())
+    assert scene.world.environment is not None, scene.warnings
+    ref = np.load(REF_DIR / f"{name}.npz")
+    image = np.asarray(render(scene, RenderSettings(seed=seed, preset="final")).image,
+                       np.float64)
+    assert np.all(np.isfinite(image))
+    ours = block_means(image, tuple(int(v) for v in ref["grid"])) @ LUMINANCE
+    theirs = ref["region_mean"] @ LUMINANCE
+    bright = theirs > 0.1 * theirs.max()
+    return float(np.abs(ours[bright] / theirs[bright] - 1).max())
+
+
+@pytest.mark.parity
+def test_hdri_yard_matches_cycles_within_2_percent():
+    assert worst_bright_region("yard") <= 0.02
