@@ -227,6 +227,20 @@ class SurfaceParams:
     transport_specular = property(lambda self: self._take("transport_specular"))
     is_transport_specular = property(lambda self: self._take("is_transport_specular"))
 
+    def replace_diffuse(self, index, diffuse) -> None:
+        """Set the diffuse reflectance (k, 3) of the hits ``index`` (and what follows from it:
+        ``diffuse_over_pi``, ``transport_diffuse``): the camera's pixel-averaged texture
+        (``integrator.supersample_textures``)."""
+        for name in TEXTURED_SLOTS:
+            self._take(name)
+        cache = self._cache
+        for name in ("diffuse", "diffuse_over_pi", "transport_diffuse"):
+            cache[name] = np.array(cache[name], np.float64)
+        keep = np.take(self.table.layer_kept, self.material[index], axis=0)
+        cache["diffuse"][index] = diffuse
+        cache["diffuse_over_pi"][index] = diffuse / np.pi
+        cache["transport_diffuse"][index] = diffuse * keep
+
     def subset(self, index) -> "SurfaceParams":
         """The parameters of the hits ``index`` (an index array or mask)."""
         out = SurfaceParams(self.table, self.material[index])

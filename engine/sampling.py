@@ -30,6 +30,8 @@ STREAM_PHOTON = 3
 STREAM_GATHER = 4
 STREAM_EDGE = 5          # the camera's extra samples of emitter edges (pipeline.py)
 STREAM_CAUSTIC = 6       # the caustic photon map's pilot and photons (photons.py)
+# (7: shadow_photons.STREAM_SHADOW_PHOTON)
+STREAM_TEXTURE = 8       # the camera's extra texture look-ups per sample (integrator.py)
 
 
 def rng_for(seed: int, stream: int, batch: int = 0) -> np.random.Generator:
