@@ -22,10 +22,11 @@ closure        seed material (weight w multiplies each line)
 =============  ================================================================================
 principled     rho_d = Base Color (1 - Metallic)(1 - Transmission); rho_s = Base Color x
                Metallic + sqrt(Base Color)(1 - Metallic) Transmission, the roulette's shares
-               (sheen, thin film, alpha: reported when they matter). The coat, the metal,
-               the dielectric specular layer (``bsdf.MaterialTable.transport_*`` for photons
-               and gather rays) and the transmission are rendered everywhere by their GGX and
-               glass lobes (``bsdf.glossy_material``), layered as Cycles layers them
+               (alpha and a thin film on the transmission: reported when they matter).
+               Sheen, coat, the metal, the dielectric specular layer (thin film on both
+               through the Fresnel; ``bsdf.MaterialTable.transport_*`` for photons and gather
+               rays) and the transmission are rendered everywhere by their lobes
+               (``bsdf.glossy_material``), layered as Cycles layers them
 diffuse        rho_d = Color (Roughness > 0, Oren-Nayar, is reported and rendered Lambertian)
 glossy         rho_s = Color, the roulette's share; rendered everywhere as GGX
 metallic       rho_s = Base Color (F82) or ((n-1)^2 + k^2) / ((n+1)^2 + k^2) (physical), the
