@@ -68,13 +68,8 @@ from .lobes import (MicrofacetGlass, MicrofacetReflection, Sheen, SmoothGlass,
 __all__ = ["MaterialTable", "SurfaceParams", "Lambertian", "PerfectMirror", "SurfaceBSDF",
            "roulette_probabilities", "reflect", "GlossyLobe", "GlassLobe", "GlossyMaterial",
            "glossy_material", "sample_glossy", "layer_diffuse_factor", "layer_average",
-           "material_averages", "reflection_albedo", "SheenLobe", "TopLayer",
-           "SHARP_ALPHA"]
+           "material_averages", "reflection_albedo", "SheenLobe", "TopLayer", "lobe_shares"]
 
-# A glossy lobe narrower than this (sqrt(alpha_x alpha_y)) takes the light of emitters it can
-# hit (emissive meshes, the world) from its own sampled rays instead of from light samples:
-# light samples rarely land inside a narrow lobe. Each lobe counts each emitter exactly once.
-SHARP_ALPHA = 0.1
 # Below this alpha_x alpha_y a microfacet lobe is a mirror (Cycles' delta threshold).
 DELTA_ALPHA2 = 2e-10
 # Cycles skips Principled components of weight at or below this (``CLOSURE_WEIGHT_CUTOFF``).
@@ -376,10 +371,6 @@ class GlossyLobe:
     def delta(self) -> bool:
         return self.alpha_x * self.alpha_y < DELTA_ALPHA2
 
-    @property
-    def sharp(self) -> bool:
-        return self.delta or np.sqrt(self.alpha_x * self.alpha_y) < SHARP_ALPHA
-
     def at(self, count: int, front=None):
         """The lobe at ``count`` hits (``front`` is for glass; a reflection ignores it)."""
         fresnel = self.make_fresnel(count)
@@ -396,9 +387,9 @@ class GlassLobe:
     ``DELTA_ALPHA2``) with index ``ior`` inside over outside: a hit on the front face (the
     ray arriving from outside) refracts with eta = ior, one on the back face with 1 / ior.
     ``reflection_tint`` / ``transmission_tint`` (3,) colour the two branches; ``f0`` (3,) is
-    the Principled remap of the Fresnel (None: the exact dielectric). Glass is ``sharp``: it
-    takes the light of the emitters and the world it sees through its own rays, never from
-    light samples (a light behind glass is not reachable by a shadow ray, in Cycles too)."""
+    the Principled remap of the Fresnel (None: the exact dielectric). Light samples reach only
+    its reflection side (a light behind glass is not reachable by a shadow ray, in Cycles
+    too); what it transmits of a light comes through its own rays."""
 
     weight: np.ndarray
     alpha: float
@@ -409,7 +400,6 @@ class GlassLobe:
     multiscatter: bool
     depth: int = 0
     transmits = True
-    sharp = True
 
     @property
     def delta(self) -> bool:
@@ -512,10 +502,9 @@ class GlossyMaterial:
         return out
 
     def entries(self, count: int, wo, n, front=None) -> list:
-        """[(weight (N, 3), lobe at the hits, sharp, delta)] for ``count`` hits."""
+        """[(weight (N, 3), lobe at the hits, delta)] for ``count`` hits."""
         weights = self.lobe_weights(wo, n)
-        return [(w, lobe.at(count, front), lobe.sharp, lobe.delta)
-                for w, lobe in zip(weights, self.lobes)]
+        return [(w, lobe.at(count, front), lobe.delta) for w, lobe in zip(weights, self.lobes)]
 
 
 def _cosine_views(points: int = 64):
@@ -730,26 +719,37 @@ def reflection_albedo(table: MaterialTable, material_ids, wo, n) -> np.ndarray:
         if spec is None:
             continue
         hits = np.flatnonzero(material_ids == material_id)
-        for w, lobe, _sharp, _delta in spec.entries(len(hits), wo[hits], n[hits]):
+        for w, lobe, _delta in spec.entries(len(hits), wo[hits], n[hits]):
             if not hasattr(lobe, "albedo_split"):
                 out[hits] += w * lobe.albedo(wo[hits], n[hits])
     return out
+
+
+def lobe_shares(lobes, wo, n) -> np.ndarray:
+    """(N, J) the probabilities with which ``sample_glossy`` picks each of the J lobes
+    ``lobes`` ((weight (3,) or (N, 3), lobe at the N hits) pairs) at view directions ``wo``: the largest
+    channel of weight x albedo(wo), normalised over the lobes (rows of 0 where none reflects)."""
+    shares = np.stack([(w * lobe.albedo(wo, n)).max(axis=1) for w, lobe in lobes], axis=1)
+    total = shares.sum(axis=1, keepdims=True)
+    return np.divide(shares, total, out=np.zeros_like(shares), where=total > 0)
 
 
 def sample_glossy(table: MaterialTable, material_ids, wo, n, rng, front=None,
                   with_delta: bool = False):
     """One direction per hit on materials with glossy lobes (``table.glossy``), in the hits'
     order, grouped by material: a lobe picked in proportion to the largest channel of its
-    weight x albedo(wo) (the weight with the covers of the layers above it), then sampled.
-    Returns (wi (N, 3), weight (N, 3) = w f |cos| / (pdf P), sharp (N,) whether the picked
-    lobe is sharp). ``wo``, ``n`` (N, 3) float64, ``n`` on wo's side; ``front`` (N,) whether
-    each hit is on the front face (glass refracts into the object there; None: all are).
-    ``with_delta``: also return delta (N,), whether the picked lobe is a delta (a mirror or
-    smooth glass)."""
+    weight x albedo(wo) (the weight with the covers of the layers above it;
+    ``lobe_shares``), then sampled. Returns (wi (N, 3), weight (N, 3) = w f |cos| / (pdf P),
+    pdf (N,) = P x the picked lobe's pdf [1/sr], inf for a delta lobe, 0 where nothing was
+    sampled): each ray estimates its own lobe's light, so ``pdf`` is the density that
+    multiple importance sampling weighs it by. ``wo``, ``n`` (N, 3) float64, ``n`` on wo's
+    side; ``front`` (N,) whether each hit is on the front face (glass refracts into the
+    object there; None: all are). ``with_delta``: also return delta (N,), whether the picked
+    lobe is a delta (a mirror or smooth glass)."""
     count = len(material_ids)
     wi_out = np.zeros((count, 3))
     weight_out = np.zeros((count, 3))
-    sharp_out = np.zeros(count, bool)
+    pdf_out = np.zeros(count)
     delta_out = np.zeros(count, bool)
     for material_id in np.unique(material_ids):
         spec = table.glossy[material_id]
@@ -759,23 +759,21 @@ def sample_glossy(table: MaterialTable, material_ids, wo, n, rng, front=None,
         side = None if front is None else front[hits]
         wo_h, n_h = wo[hits], n[hits]
         lobes = spec.entries(len(hits), wo_h, n_h, side)
-        shares = np.stack([(w * lobe.albedo(wo_h, n_h)).max(axis=1)
-                           for w, lobe, _, _ in lobes], axis=1)
+        shares = lobe_shares([(w, lobe) for w, lobe, _ in lobes], wo_h, n_h)
         total = shares.sum(axis=1)
-        cdf = np.cumsum(shares, axis=1) / np.where(total > 0, total, 1.0)[:, None]
+        cdf = np.cumsum(shares, axis=1)
         pick = np.minimum((cdf < rng.random(len(hits))[:, None]).sum(axis=1), len(lobes) - 1)
         u = rng.random((len(hits), 3))
-        for j, (w, lobe, sharp, delta) in enumerate(lobes):
+        for j, (w, lobe, delta) in enumerate(lobes):
             sel = np.flatnonzero((pick == j) & (total > 0))
             if len(sel) == 0:
                 continue
-            wi, weight, _pdf = lobe.subset(sel).sample(wo_h[sel], n_h[sel], u[sel])
+            wi, weight, pdf = lobe.subset(sel).sample(wo_h[sel], n_h[sel], u[sel])
             at = hits[sel]
             wi_out[at] = wi
-            weight_out[at] = np.nan_to_num(weight * w[sel] /
-                                           (shares[sel, j] / total[sel])[:, None])
-            sharp_out[at] = sharp
+            weight_out[at] = np.nan_to_num(weight * w[sel] / shares[sel, j][:, None])
+            pdf_out[at] = pdf * shares[sel, j]
             delta_out[at] = delta
     if with_delta:
-        return wi_out, weight_out, sharp_out, delta_out
-    return wi_out, weight_out, sharp_out
+        return wi_out, weight_out, pdf_out, delta_out
+    return wi_out, weight_out, pdf_out

@@ -90,11 +90,12 @@ def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.
     image world (``lights.EnvironmentLight``), one radiance per sample (K, 3). Callers that weight the irradiance per
     point (albedo, pixel) can then do so on scalars instead of (N, 3) arrays.
     ``shadow_map``: a ``ShadowPhotonMap``; None traces every shadow ray (module docstring).
-    ``with_directions``: terms are (target, scalar, rgb, directions, hittable) instead, with
-    each sample's unit direction to the light (rows of ``scalar``) and what a ray could hit
-    of the light (``"mesh"`` for an emissive mesh, ``"world"``, ``""`` for lights that are
-    not geometry), for BSDFs other than Lambert's: a sample's radiance towards wo is then
-    f(wo, direction) x scalar x rgb."""
+    ``with_directions``: terms are (target, scalar, rgb, directions, hittable, light)
+    instead, with each sample's unit direction to the light (rows of ``scalar``), what a ray
+    could hit of the light (``_hittable``: ``"mesh"``, ``"world"``, ``"area"`` or ``""``) and
+    the light's index in ``lights.sampled`` (-1 for delta lights), for BSDFs other than
+    Lambert's: a sample's radiance towards wo is then f(wo, direction) x scalar x rgb (times
+    a weight of multiple importance sampling where the BSDF's rays meet the light too)."""
     count = len(x)
     if count == 0 or lights.empty:
         return []
@@ -110,10 +111,10 @@ def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.
         if tally is not None:
             tally["plain"] += int(live.sum())
         if live.all():
-            groups.append((None, w, dist, weight, rgb, False, ""))
+            groups.append((None, w, dist, weight, rgb, False, "", -1))
         elif live.any():
             idx = np.nonzero(live)[0]
-            groups.append((idx, w[idx], dist[idx], weight[idx], rgb, False, ""))
+            groups.append((idx, w[idx], dist[idx], weight[idx], rgb, False, "", -1))
 
     # Sampled lights: K stratified samples per point, light chosen by estimated contribution.
     if lights.sampled and light_samples > 0:
@@ -149,7 +150,7 @@ def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.
             if live.any():
                 groups.append((pts[live], w[live], dist[live], weight[live],
                                light.rgb if rgb is None else rgb[live],
-                               getattr(light, 'in_bvh', False), _hittable(light)))
+                               getattr(light, 'in_bvh', False), _hittable(light), li))
 
     if not groups:
         _count_classes(stats, tally, 0)
@@ -211,7 +212,7 @@ def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.
     for group in groups:
         size = len(group[2])
         term = (group[0], group[3] * visible[offset:offset + size], group[4])
-        terms.append(term + (group[1], group[6]) if with_directions else term)
+        terms.append(term + (group[1], group[6], group[7]) if with_directions else term)
         offset += size
     if stats is not None:
         stats["shadow_rays"] = stats.get("shadow_rays", 0) + len(org)
@@ -271,10 +272,11 @@ def _classified_samples(groups, unshadowed, tally, shadow_map, li, light, x, n, 
         trace = below & ~near
         keep = ~below & ~near
         if keep.any():
-            unshadowed.append((p[keep], weight[lit[keep]], light.rgb, w[lit[keep]], hittable))
+            unshadowed.append((p[keep], weight[lit[keep]], light.rgb, w[lit[keep]], hittable,
+                               li))
         if trace.any():
             t = lit[trace]
-            groups.append((pts[t], w[t], dist[t], weight[t], light.rgb, in_bvh, hittable))
+            groups.append((pts[t], w[t], dist[t], weight[t], light.rgb, in_bvh, hittable, li))
     # UMBRA: no light, no ray. PENUMBRA: every sample of the pair (live or not: the class
     # must not depend on the sample's numbers) becomes M fresh stratified samples.
     pen = np.flatnonzero(cls == PENUMBRA)
@@ -284,7 +286,7 @@ def _classified_samples(groups, unshadowed, tally, shadow_map, li, light, x, n, 
     if m == 1:
         t = pen[live[pen]]
         if len(t):
-            groups.append((pts[t], w[t], dist[t], weight[t], light.rgb, in_bvh, hittable))
+            groups.append((pts[t], w[t], dist[t], weight[t], light.rgb, in_bvh, hittable, li))
         return
     p = np.repeat(pts[pen], m)
     u = sampling.stratified_2d(len(pen), m, rng).reshape(-1, 2)
@@ -292,4 +294,5 @@ def _classified_samples(groups, unshadowed, tally, shadow_map, li, light, x, n, 
     weight_m = weight_m / (np.repeat(p_sel[pen], m) * (k * m))
     ok = (weight_m > 0) & np.isfinite(weight_m)
     if ok.any():
-        groups.append((p[ok], w_m[ok], dist_m[ok], weight_m[ok], light.rgb, in_bvh, hittable))
+        groups.append((p[ok], w_m[ok], dist_m[ok], weight_m[ok], light.rgb, in_bvh, hittable,
+                       li))

@@ -303,7 +303,7 @@ def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfa
             # mirrored.
             glossy = np.flatnonzero(surface.camera_glossy[idx])
             if len(glossy):
-                g_dirs, g_weight, _sharp = sample_glossy(
+                g_dirs, g_weight, _pdf = sample_glossy(
                     surfaces.materials, surface.material[idx[glossy]],
                     -incoming[glossy].astype(np.float64), nm[glossy].astype(np.float64), rng,
                     ~facing[idx[glossy]])

@@ -26,9 +26,15 @@ What it computes
           photons, ``surface_irradiance`` of the gather or cache estimator): the lobes'
           indirect light, one final-gather ray of the lobe (``_GlossyHits``; with indirect =
           photon, which stores no direct light, the irradiance estimate x albedo / pi as if
-          it came evenly). The world reaches glossy lobes only through their own rays;
-          emissive meshes through their rays for sharp lobes (``bsdf.SHARP_ALPHA``), through
-          light samples otherwise, so that each light is counted once. Photons and gather
+          it came evenly). Lights that the lobes' rays meet too (area lights, lights with a
+          radius, emissive meshes, the world) reach each non-delta lobe by both strategies,
+          weighted by Veach's power heuristic (multiple importance sampling, Veach 1997
+          §9.2): light samples by p_light^2 / (p_light^2 + p_lobe^2) (``_GlossyHits.
+          radiance``), the lobe's ray where it meets the light by the complement
+          (``bsdf_strategy_weights``), p_light = light samples x selection x the light's
+          ``solid_angle_pdf`` (``lights.LightSet.sample_density``), p_lobe = the lobe's pick
+          probability x its pdf (``bsdf.sample_glossy``); suns and point lights only by light
+          samples, delta lobes only by their rays. Photons and gather
           rays see these materials as ``MaterialTable.transport_*`` says: glossy lobes and
           glass sampled, a Principled layer as a specular share over a diffuse reduced by it;
         * glass (``bsdf.GlassLobe``: Glass, Refraction, Principled Transmission) is a lobe
@@ -36,8 +42,9 @@ What it computes
           leaving by a back face, all its light from its own rays;
         * caustics: at diffuse hits (``full`` mode) the caustic map's irradiance
           (``indirect.CausticEstimate``, ``context.caustics``) x rho_d / pi, in Indirect;
-        * after a mirror or smooth-glass bounce, point and spot lights with a radius that the
-          ray meets add their radiance (``lights.seen_light_radiance``: their glints).
+        * after a bounce, area lights and point and spot lights with a radius that the ray
+          meets add their radiance (``lights.seen_light_radiance``): in full after a mirror
+          or smooth glass (their glints), with the MIS weight after a glossy lobe.
         Materials are read through ``bsdf`` (``SceneSurfaces.params``). Pixels whose filter
         may hold an emitter's edge (``emitter_edges``) take their camera-seen emission from
         ``EDGE_SAMPLES_FACTOR`` x samples of their own (``edge_emission``): at 16 spp such a
@@ -61,7 +68,7 @@ import numpy as np
 
 from . import sampling
 from .camera import pixel_rays
-from .bsdf import layer_diffuse_factor, reflection_albedo, sample_glossy
+from .bsdf import layer_diffuse_factor, lobe_shares, reflection_albedo, sample_glossy
 from .direct import direct_terms, irradiance_from_terms
 from .passes import DIFFUSE, GLOSSY, LIGHT_PASS_NAMES, TRANSMISSION, LightSums
 from .lights import ray_visible, seen_light_radiance
@@ -79,6 +86,89 @@ MAX_HISTOGRAM_MATERIALS = 64
 EDGE_SAMPLES_FACTOR = 16    # an emitter edge's pixel: this x samples for its emission
 # Extra texture look-ups per primary sample on a textured material (``supersample_textures``).
 TEXTURE_SUPERSAMPLES = 7
+
+# How glossy lobes take the light of the lights their own rays meet (area lights, lights with
+# a radius, emissive meshes, the world): "mis", both strategies weighted by the power
+# heuristic (Veach 1997 §9.2.2); "light", light samples alone; "bsdf", the lobes' rays alone
+# (each strategy still takes what the other cannot reach). The last two are for tests.
+GLOSSY_LIGHT_STRATEGY = "mis"
+
+
+def power_heuristic(p_this: np.ndarray, p_other: np.ndarray) -> np.ndarray:
+    """Veach's power heuristic (beta = 2): p_this^2 / (p_this^2 + p_other^2) per sample (N,),
+    1 where p_this is inf (a delta), 0 where p_this is 0 and p_other is not; densities [1/sr]
+    with each strategy's sample count folded in."""
+    p_this = np.asarray(p_this, np.float64)
+    p_other = np.asarray(p_other, np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = p_other / p_this
+    out = 1.0 / (1.0 + ratio * ratio)
+    out = np.where(np.isinf(p_this), 1.0, out)
+    return np.where(np.isnan(out), np.where(p_other > 0, 0.0, 1.0), out)
+
+
+def _emitter_weights(context, prim, pdf, points, normals, directions) -> np.ndarray:
+    """(N, 3) ``bsdf_strategy_weights`` of rays that meet emissive triangles ``prim``, per
+    colour channel: a textured emitter samples each channel as its own light
+    (``lights.textured_emitters``), so each channel has its own light density."""
+    which = context.lights.channel_emitters[prim]
+    same = (which[:, 0] == which[:, 1]) & (which[:, 1] == which[:, 2])
+    out = np.ones((len(prim), 3))
+    if same.any():
+        out[same] = bsdf_strategy_weights(context, which[same, 0], pdf[same], points[same],
+                                          normals[same], directions[same])[:, None]
+    rest = np.flatnonzero(~same)
+    for channel in range(3) if len(rest) else ():
+        out[rest, channel] = bsdf_strategy_weights(context, which[rest, channel], pdf[rest],
+                                                   points[rest], normals[rest],
+                                                   directions[rest])
+    return out
+
+
+def light_strategy_weights(p_light, p_bsdf, strategy: str | None = None) -> np.ndarray:
+    """(N,) the weight of light samples drawn with densities ``p_light`` where the lobe's
+    rays would come with ``p_bsdf`` (``GLOSSY_LIGHT_STRATEGY``). A light sample whose
+    density comes out 0 (round-off at a light's edge: it was drawn) keeps weight 1."""
+    strategy = strategy or GLOSSY_LIGHT_STRATEGY
+    p_light = np.where(np.asarray(p_light) > 0, p_light, np.inf)
+    if strategy == "light":
+        return np.ones(len(p_light))
+    if strategy == "bsdf":
+        return (np.asarray(p_bsdf) <= 0).astype(np.float64)
+    return power_heuristic(p_light, p_bsdf)
+
+
+def bsdf_strategy_weights(context, which, pdf, points, normals, directions,
+                          strategy: str | None = None) -> np.ndarray:
+    """(N,) the weight of rays drawn by a lobe with densities ``pdf`` (inf: a delta, weight 1;
+    None: camera rays, weight 1) from ``points`` with shading ``normals``, that meet light
+    ``which`` (N,) of ``context.lights.sampled`` (-1: none, weight 1) along ``directions``:
+    the complement of ``light_strategy_weights`` against the density of that vertex's light
+    samples (``LightSet.sample_density``; 0 below the normal, where a light sample gives
+    nothing)."""
+    count = len(which)
+    if pdf is None:
+        return np.ones(count)
+    strategy = strategy or GLOSSY_LIGHT_STRATEGY
+    out = np.ones(count)
+    ask = np.flatnonzero((which >= 0) & np.isfinite(pdf))
+    if len(ask) == 0:
+        return out
+    x, n = points[ask], normals[ask]
+    w = np.asarray(directions[ask], np.float64)
+    p_light = np.zeros(len(ask))
+    for index in np.unique(which[ask]):
+        sel = np.flatnonzero(which[ask] == index)
+        p_light[sel] = context.lights.sample_density(x[sel], n[sel], w[sel], int(index),
+                                                     context.settings.light_samples)
+    p_light *= sampling.dot_rows(n, w) > 0
+    if strategy == "light":
+        out[ask] = (p_light <= 0).astype(np.float64)
+    elif strategy == "bsdf":
+        out[ask] = 1.0
+    else:
+        out[ask] = power_heuristic(pdf[ask], p_light)
+    return out
 PART_NAMES = ("Emission", "Direct", "Indirect")
 
 
@@ -218,18 +308,17 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
     light = LightSums(pixels, spp) if context.light_passes else None
     follows = materials.has_specular or materials.has_glossy
     throughput = np.ones((count, 3), np.float32) if follows else None
-    # Per ray: whether emissive meshes it hits count (False after a glossy lobe that took
-    # their light from light samples, ``bsdf.SHARP_ALPHA``); the world always counts (glossy
-    # lobes take it from their own rays, never from light samples).
-    collects = None
+    # Per ray after a bounce: the density its lobe drew it with (``bsdf.sample_glossy``: lobe
+    # pick x lobe pdf; inf after a delta lobe or a mirror) and the vertex it left (point,
+    # shading normal): the lights it meets count with the BSDF's weight of multiple importance
+    # sampling (``bsdf_strategy_weights``) against that vertex's light samples.
+    mis_pdf = mis_x = mis_n = None
     # Per ray: an emission probe (from a glossy hit where the path ended, ``_GlossyHits``):
     # it counts the world or emitter it meets and is not shaded.
     probes = None
     ray_of = np.arange(count)
-    # Per ray: it left a mirror or smooth glass (a delta lobe, which no light sample reaches),
-    # so it sees the lights that are not geometry (area lights, lights with a radius:
-    # ``lights.ray_visible``).
-    sees_lights = None
+    # Rays after a bounce see the lights that are not geometry (area lights, lights with a
+    # radius: ``lights.ray_visible``).
     ray_lights = any(ray_visible(light) for light in context.lights.sampled)
     world = scene.world.radiance
     image_world = scene.world.environment is not None     # radiance per direction
@@ -254,17 +343,22 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
         stats["trace_seconds"] += time.perf_counter() - t0
         stats["camera_rays" if depth == 0 else "specular_rays"] += len(origins)
         hit = prim >= 0
-        if depth > 0 and ray_lights and sees_lights.any():
-            # Area lights and lights with a radius seen after a mirror or smooth glass bounce:
-            # their glint (no light sample reaches them through a delta lobe).
-            d_rays = np.flatnonzero(sees_lights)
-            t_seen = np.where(hit[d_rays], _t[d_rays], np.inf)
-            glint = seen_light_radiance(context.lights, origins[d_rays], directions[d_rays],
-                                        t_seen)
-            add_to_pixels(emission_sums, ray_of[d_rays] // spp,
-                          glint * throughput[d_rays])
-            if light is not None:
-                light.add(ray_of[d_rays], glint * throughput[d_rays], direct=depth == 1)
+        if depth > 0 and ray_lights:
+            # Area lights and lights with a radius seen after a bounce: after a mirror or
+            # smooth glass their glint (no light sample reaches them through a delta lobe),
+            # after a glossy lobe weighted against its light samples.
+            t_seen = np.where(hit, _t, np.inf)
+            glint, which = seen_light_radiance(context.lights, origins, directions, t_seen,
+                                               with_index=True)
+            seen = np.flatnonzero(which >= 0)
+            if len(seen):
+                value = glint[seen] * throughput[seen]
+                value *= bsdf_strategy_weights(context, which[seen], mis_pdf[seen],
+                                               mis_x[seen], mis_n[seen],
+                                               directions[seen])[:, None]
+                add_to_pixels(emission_sums, ray_of[seen] // spp, value)
+                if light is not None:
+                    light.add(ray_of[seen], value, direct=depth == 1)
         all_hit = bool(hit.all())
         if not all_hit and not scene.world.is_black:
             seen_world = scene.world.radiance_towards(directions[~hit]) if image_world \
@@ -272,6 +366,11 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
             missed = seen_world if throughput is None else throughput[~hit] * seen_world
             if depth == 0 and own_emission is not None:
                 missed = missed * own_emission[ray_of[~hit]][:, None]
+            if mis_pdf is not None:
+                gone = ~hit
+                missed = missed * bsdf_strategy_weights(
+                    context, np.full(int(gone.sum()), context.lights.world_index),
+                    mis_pdf[gone], mis_x[gone], mis_n[gone], directions[gone])[:, None]
 
             add_to_pixels(emission_sums, ray_of[~hit] // spp, missed)
             if light is not None:
@@ -285,11 +384,12 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
             prim, bu, bv, t_hit = prim[hit], bu[hit], bv[hit], _t[hit]
             d, o, rays = directions[hit], origins[hit], ray_of[hit]
             thr = None if throughput is None else throughput[hit]
-            collecting = None if collects is None else collects[hit]
             probing = None if probes is None else probes[hit]
+            if mis_pdf is not None:
+                mis_pdf, mis_x, mis_n = mis_pdf[hit], mis_x[hit], mis_n[hit]
         else:
             t_hit, d, o, rays, thr = _t, directions, origins, ray_of, throughput
-            collecting, probing = collects, probes
+            probing = probes
         # Samples in order (primary rays, all hit): pixel sums need no index.
         in_order = depth == 0 and all_hit
         pixel_of = None if in_order else rays // spp
@@ -306,8 +406,11 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
             emitted = surface.emitted_radiance * (front | surface.both_sides)[:, None]
             if depth == 0 and own_emission is not None:
                 emitted *= own_emission[rays][:, None]
-            if collecting is not None:
-                emitted *= collecting[:, None]
+            if mis_pdf is not None:
+                lit = np.flatnonzero(np.any(emitted > 0, axis=1))
+                if len(lit):
+                    emitted[lit] *= _emitter_weights(context, prim[lit], mis_pdf[lit],
+                                                     mis_x[lit], mis_n[lit], d[lit])
             add_to_pixels(emission_sums, pixel_of, emitted if thr is None else thr * emitted)
             if light is not None:
                 if depth == 0:
@@ -341,7 +444,6 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
             prim, bu, bv, d, o, rays = (a[shaded] for a in (prim, bu, bv, d, o, rays))
             x, ng, ns, front = x[shaded], ng[shaded], ns[shaded], front[shaded]
             thr = thr[shaded]
-            collecting = None if collecting is None else collecting[shaded]
             surface = surface.subset(shaded)
             pixel_of = rays // spp
 
@@ -404,33 +506,23 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
         if not mirror.any() and glossy is None:
             break
         idx = np.nonzero(mirror)[0]
-        directions, weight, _pdf = surface.subset(idx).bsdf().mirror.sample(-d[idx], ns[idx])
-        keep = np.ones(len(idx), bool)
+        directions, weight, mis_pdf = surface.subset(idx).bsdf().mirror.sample(-d[idx], ns[idx])
         if glossy is not None:
-            g_dirs, g_weight, g_keep, g_collect, g_delta = glossy.sample(rng)
+            g_dirs, g_weight, g_keep, g_pdf = glossy.sample(rng)
             stats["glossy_rays"] += glossy.count
-            idx = np.concatenate([idx, glossy.index])
-            directions = np.concatenate([directions, g_dirs.astype(directions.dtype)])
-            weight = np.concatenate([weight, g_weight])
-            keep = np.concatenate([keep, g_keep])
-            collect_next = np.concatenate([np.ones(len(directions) - len(g_dirs), bool),
-                                           g_collect])
-            probe_next = np.concatenate([np.zeros(len(directions) - len(g_dirs), bool),
-                                         ~glossy.goes_on[glossy.index]])
-            delta_next = np.concatenate([np.ones(len(directions) - len(g_dirs), bool), g_delta])
-            idx, directions, weight = idx[keep], directions[keep], weight[keep]
-            collect_next, probes = collect_next[keep], probe_next[keep]
-            sees_lights = delta_next[keep]
-            if collecting is not None:
-                collect_next &= collecting[idx]
-            collects = collect_next
+            mirrors = len(idx)
+            keep = np.concatenate([np.ones(mirrors, bool), g_keep])
+            idx = np.concatenate([idx, glossy.index])[keep]
+            directions = np.concatenate([directions, g_dirs.astype(directions.dtype)])[keep]
+            weight = np.concatenate([weight, g_weight])[keep]
+            mis_pdf = np.concatenate([mis_pdf, g_pdf])[keep]
+            probes = np.concatenate([np.zeros(mirrors, bool),
+                                     ~glossy.goes_on[glossy.index]])[keep]
         else:
             probes = None
-            sees_lights = np.ones(len(idx), bool)
-            if collecting is not None:
-                collects = collecting[idx]
         if len(idx) == 0:
             break
+        mis_x, mis_n = x[idx].astype(np.float64), ns[idx].astype(np.float64)
         origins = accel.offset_origins(x[idx], ng[idx], directions)
         tmax = None
         throughput = thr[idx] * weight
@@ -714,7 +806,8 @@ class _GlossyHits:
         self.wo, self.n = wo, n
         self.materials = materials
         self.material_ids = surface.material[self.index]
-        self.groups = []        # (hits (k,) into the vertex, [(weight (k, 3), lobe, sharp)])
+        # (hits (k,) into the vertex, [(weight (k, 3), lobe, delta)], lobe shares (k, J))
+        self.groups = []
         self.group_of = np.full(count, -1)
         self.row_of = np.zeros(count, np.int64)
         ids = self.material_ids
@@ -724,8 +817,7 @@ class _GlossyHits:
             self.row_of[hits] = np.arange(len(hits))
             spec = materials.glossy[material_id]
             wo_h, n_h = wo[hits].astype(np.float64), n[hits].astype(np.float64)
-            lobes = [(w, lobe, sharp) for w, lobe, sharp, _delta
-                     in spec.entries(len(hits), wo_h, n_h, self.front[hits])]
+            lobes = spec.entries(len(hits), wo_h, n_h, self.front[hits])
             if spec.layered:
                 self.diffuse_factor[hits] = spec.diffuse_factor(wo_h, n_h)
             albedo = sum(w * lobe.albedo(wo_h, n_h) for w, lobe, _ in lobes)
@@ -733,7 +825,8 @@ class _GlossyHits:
             goes_on = albedo.max(axis=1) > diffuse.max(axis=1)
             self.goes_on[hits] = goes_on
             self.ending_albedo[hits] = albedo * ~goes_on[:, None]
-            self.groups.append((hits, lobes))
+            self.groups.append((hits, lobes, lobe_shares([(w, lobe) for w, lobe, _ in lobes],
+                                                         wo_h, n_h)))
             if split:
                 for w, lobe, _ in lobes:
                     if hasattr(lobe, "albedo_split"):
@@ -746,51 +839,60 @@ class _GlossyHits:
 
     def sample(self, rng):
         """One ray per glossy hit, in the order of ``index`` (``bsdf.sample_glossy``):
-        returns (directions, weight = w f cos / (pdf P), kept, collects, delta) where
-        ``delta`` says the picked lobe is a mirror or smooth glass and ``collects``
-        says whether the ray counts the emissive meshes it hits (sharp lobes: see
-        ``bsdf.SHARP_ALPHA``; the world it reaches always counts). From hits where the path
-        ends the ray is an emission probe."""
-        wi, weight, sharp, delta = sample_glossy(self.materials, self.material_ids,
-                                                 self.wo[self.index].astype(np.float64),
-                                                 self.n[self.index].astype(np.float64), rng,
-                                                 self.front[self.index], with_delta=True)
-        return wi, weight, np.any(weight > 0, axis=1), sharp, delta
+        returns (directions, weight = w f cos / (pdf P), kept, pdf) where ``pdf`` is P x the
+        picked lobe's density (inf for a mirror or smooth glass), the BSDF's side of multiple
+        importance sampling for the lights the ray meets. From hits where the path ends the
+        ray is an emission probe."""
+        wi, weight, pdf = sample_glossy(self.materials, self.material_ids,
+                                        self.wo[self.index].astype(np.float64),
+                                        self.n[self.index].astype(np.float64), rng,
+                                        self.front[self.index])
+        return wi, weight, np.any(weight > 0, axis=1) & (pdf > 0), pdf
 
-    def radiance(self, target, directions, hittable):
+    def radiance(self, target, directions, p_light=None, meets=None):
         """f summed over the lobes (k, 3) for light samples of the glossy hits ``target``
-        (positions in ``index``) arriving from ``directions``. At hits where the path goes on,
-        the world's samples are left out (the lobes' own rays take the world: for a uniform
-        world their weight is the albedo, noiseless, where cosine-distributed light samples
-        under a lobe of alpha 0.25 were 5-9 % noisy at 16 spp), and so are emissive meshes'
-        for sharp lobes. Area lights and lights with a radius (``lights.ray_visible``) stay
-        with light samples for every lobe but the deltas (whose f is 0 there): taking them
-        from a sharp lobe's rays instead made the copper sphere's highlight of a 1 m area
-        light a spray of fireflies (a region +-11 % between seeds against +-1 %). Where the
-        path ends the same holds: its ray goes on as an emission probe (counted at the next
-        hit, not shaded)."""
+        (positions in ``index``) arriving from ``directions``. ``p_light`` (k,): the density
+        the light samples were drawn with (``lights.LightSet.sample_density``) for a light
+        the lobes' own rays also meet (area lights, lights with a radius, emissive meshes,
+        the world; None for the others, suns and point lights, which keep weight 1); each
+        non-delta lobe j then weighs its f by the power heuristic p_light^2 / (p_light^2 +
+        p_j^2), p_j = its pick probability x its pdf (``bsdf.sample_glossy``), whose
+        complement its rays take where they meet the light (Veach 1997 §9.2). ``meets``
+        (k,): where a ray along the direction would not meet the light (an ellipse's light
+        samples on its fan beyond the ellipse), p_j counts as 0. Delta lobes have f = 0 here:
+        their rays take all the light they meet. Where the path ends the same holds: its ray
+        goes on as an emission probe (counted at the next hit, not shaded)."""
         f = np.zeros((len(target), 3))
         hit_of = self.index[target]
         group = self.group_of[hit_of]
         rows = self.row_of[hit_of]
-        for g, (_hits, lobes) in enumerate(self.groups):
+        for g, (_hits, lobes, shares) in enumerate(self.groups):
             sel = np.flatnonzero(group == g)
             if len(sel) == 0:
                 continue
             wo = self.wo[hit_of[sel]].astype(np.float64)
             n = self.n[hit_of[sel]].astype(np.float64)
             wi = directions[sel].astype(np.float64)
-            for w, lobe, sharp in lobes:
-                if hittable == "world" or (sharp and hittable == "mesh"):
+            for j, (w, lobe, delta) in enumerate(lobes):
+                if delta:
                     continue
-                f[sel] += w[rows[sel]] * lobe.subset(rows[sel]).evaluate(wo, wi, n)
+                at = lobe.subset(rows[sel])
+                value = w[rows[sel]] * at.evaluate(wo, wi, n)
+                if p_light is not None:
+                    p_bsdf = shares[rows[sel], j] * at.pdf(wo, wi, n)
+                    if meets is not None:
+                        p_bsdf = p_bsdf * meets[sel]
+                    value *= light_strategy_weights(p_light[sel], p_bsdf)[:, None]
+                f[sel] += value
         return f
 
 
 def _shade_glossy_direct(context, stats, rng, glossy, x, ns, ng, thr, rays, spp, direct_sums,
                          light=None, depth=0):
     """Direct light reflected by the glossy lobes: light samples at the glossy hits
-    (``direct.direct_terms`` with their directions), each weighted by the lobes' f (into
+    (``direct.direct_terms`` with their directions), each weighted by the lobes' f and, for
+    lights the lobes' rays meet as well, by the light's weight of multiple importance sampling
+    (``_GlossyHits.radiance``) (into
     ``light``'s passes: Glossy Direct at the first hit ``depth`` 0, where light samples reach
     only the reflection side; the path's kind's Indirect after)."""
     settings = context.settings
@@ -804,9 +906,19 @@ def _shade_glossy_direct(context, stats, rng, glossy, x, ns, ng, thr, rays, spp,
     stats["trace_seconds"] += shadow_stats.get("trace_seconds", 0.0)
     radiance = np.zeros((len(idx), 3))
     everyone = np.arange(len(idx))
-    for target, scalar, rgb, dirs, hittable in terms:
+    lights = context.lights
+    for target, scalar, rgb, dirs, hittable, index in terms:
         target = everyone if target is None else target
-        f = glossy.radiance(target, dirs, hittable)
+        p_light = meets = None
+        if hittable:
+            # A light the lobes' rays meet too: multiple importance sampling.
+            at = idx[target]
+            p_light = lights.sample_density(x[at], ns[at], dirs, index, settings.light_samples)
+            p_light *= sampling.dot_rows(ns[at].astype(np.float64), dirs) > 0
+            if hittable == "area":
+                meets = lights.sampled[index].intersect(x[at].astype(np.float64), dirs,
+                                                        np.inf)[1] > 0
+        f = glossy.radiance(target, dirs, p_light, meets)
         rgb = np.asarray(rgb, np.float64)
         contribution = f * (scalar[:, None] * (rgb if rgb.ndim == 2 else rgb[None]))
         for c in range(3):

@@ -32,7 +32,20 @@ Sampling
     lights sample the cone they subtend uniformly (the standard sphere-light sampling; Cycles
     ``point_light_sample``), cosine directions from inside, and their facing disk by area; a
     spot's mask is evaluated on each sample's direction (``SphereLight``).
-    ``seen_light_radiance`` gives what camera rays after a delta bounce see of sphere lights.
+    ``seen_light_radiance`` gives what camera rays after a bounce see of the lights that are
+    not geometry (``ray_visible``).
+
+Densities for multiple importance sampling
+    Every sampled light has ``solid_angle_pdf(points, normals, wi)`` -> (N,): the density
+    [1/sr] with which its own ``sample`` at ``points`` (N, 3) with unit ``normals`` (N, 3)
+    produces the unit directions ``wi`` (N, 3), given that this light was picked; 0 where wi
+    misses the light. Where a direction meets an emitter more than once (a closed mesh), the
+    nearest point along it decides (the only one a ray can meet: the far faces' samples are
+    in shadow). Spot masks and one-sided facing weight the estimate, not the density, so they
+    are not in it. ``LightSet.sample_density(points, normals, wi, index, light_samples)``
+    adds the pick and the count of ``direct.direct_terms``: light_samples x
+    ``selection_weights`` x ``solid_angle_pdf`` (Veach 1997 §9.2.2's n_i p_i). A light type
+    added later (an HDRI world) must give the same method with the same signature.
 
 Units: see ``engine/scene.py``. Radiance in W m^-2 sr^-1, irradiance in W m^-2.
 """
@@ -41,6 +54,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import sampling
+from .accel import Accelerator
 from .bsdf import MaterialTable
 from .scene import AreaLight, PointLight, Scene, SpotLight, SunLight
 
@@ -171,25 +185,91 @@ class TriangleEmitter:
         """Nearest hit t (N,) of rays with the triangles on their emitting side (inf: none
         before ``t_max``) and the radiance factor there (1; 0 for no hit): Moller-Trumbore
         over the (few) triangles of an area light that is not geometry."""
-        best = np.broadcast_to(np.asarray(t_max, np.float64), (len(origins),)).copy()
-        factor = np.zeros(len(origins))
-        for tri, normal in zip(self.tris, self.normals):
+        tri, t = self.nearest_triangle(origins, directions, t_max, emitting_side=True)
+        hit = tri >= 0
+        return np.where(hit, t, np.inf), hit.astype(np.float64)
+
+    def nearest_triangle(self, origins, directions, t_max=np.inf, emitting_side=False):
+        """(triangle index (N,), -1 for none; distance t (N,)) of the nearest triangle each
+        ray meets before ``t_max`` (with ``emitting_side``: only triangles met on their
+        emitting side). Moller-Trumbore a triangle at a time over the rays for up to
+        ``SOLID_ANGLE_MAX_TRIANGLES`` triangles, an Embree BVH of the emitter's own
+        triangles (built at the first call) for larger meshes."""
+        o = np.asarray(origins, np.float64).reshape(-1, 3)
+        w = np.asarray(directions, np.float64).reshape(-1, 3)
+        best = np.broadcast_to(np.asarray(t_max, np.float64), (len(o),)).copy()
+        index = np.full(len(o), -1)
+        if len(self.tris) > SOLID_ANGLE_MAX_TRIANGLES:
+            if getattr(self, "bvh", None) is None:
+                self.bvh = Accelerator(self.tris, threads=1)
+            t, prim, _u, _v = self.bvh.intersect(o, w, np.minimum(best, 1e37))
+            t = t.astype(np.float64)
+            hit = (prim >= 0) & (t < best)
+            if emitting_side and not self.two_sided:
+                hit &= _dot(w, self.normals[np.maximum(prim, 0)]) < 0
+            return np.where(hit, prim, -1), np.where(hit, t, np.inf)
+        for k, (tri, normal) in enumerate(zip(self.tris, self.normals)):
             e1, e2 = tri[1] - tri[0], tri[2] - tri[0]
-            p = np.cross(directions, e2)
+            p = np.cross(w, e2)
             det = p @ e1
             ok = np.abs(det) > 1e-300
             inv = 1.0 / np.where(ok, det, 1.0)
-            s = origins - tri[0]
+            s = o - tri[0]
             u = _dot(s, p) * inv
             q = np.cross(s, e1)
-            v = _dot(directions, q) * inv
+            v = _dot(w, q) * inv
             t = (q @ e2) * inv
             hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0) & (t < best)
-            if not self.two_sided:
-                hit &= directions @ normal < 0
+            if emitting_side and not self.two_sided:
+                hit &= w @ normal < 0
             best = np.where(hit, t, best)
-            factor = np.where(hit, 1.0, factor)
-        return np.where(factor > 0, best, np.inf), factor
+            index = np.where(hit, k, index)
+        return index, np.where(index >= 0, best, np.inf)
+
+    def _solid_angles(self, x):
+        """(N, T) solid angles [sr] of the triangles seen from points x, 0 for one-sided
+        triangles seen from behind, times each triangle's factor ``scale`` (the sampler's
+        choice of triangle, ``sample``)."""
+        a = self.tris[None, :, 0] - x[:, None]
+        b = self.tris[None, :, 1] - x[:, None]
+        c = self.tris[None, :, 2] - x[:, None]
+        omega = solid_angle(_normalize(a), _normalize(b), _normalize(c))  # (N, T)
+        # Triangles seen from behind (one-sided) or edge-on give nothing: skip them.
+        if not self.two_sided:
+            side = np.einsum("ntk,tk->nt", a, self.normals)
+            omega = np.where(side < 0, omega, 0.0)
+        if self.scale is not None:
+            omega = omega * self.scale[None, :]    # triangles by solid angle x factor
+        return omega
+
+    def solid_angle_pdf(self, points, normals, wi):
+        """(N,) the density [1/sr] with which ``sample`` at ``points`` gives the unit
+        directions ``wi`` (0 where wi misses the emitter): the nearest triangle along wi
+        decides; solid-angle sampling 1 / Omega_total (a small triangle's area sampling:
+        Omega_t / Omega_total x r^2 / (cos_l A_t)); area sampling r^2 / (cos_l A_total)."""
+        x = np.asarray(points, np.float64).reshape(-1, 3)
+        w = np.asarray(wi, np.float64).reshape(-1, 3)
+        pdf = np.zeros(len(x))
+        tri, t = self.nearest_triangle(x, w)
+        hit = np.flatnonzero(tri >= 0)
+        if len(hit) == 0:
+            return pdf
+        k, r = tri[hit], t[hit]
+        cos_l = np.abs(_dot(w[hit], self.normals[k]))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            if self.use_solid_angle:
+                omega = self._solid_angles(x[hit])
+                total = omega.sum(axis=1)
+                chosen = omega[np.arange(len(hit)), k]
+                small = chosen / total * r * r / (cos_l * self.areas[k])
+                factor = 1.0 if self.scale is None else self.scale[k]
+                value = np.where(chosen > SOLID_ANGLE_MIN, factor / total, small)
+                value = np.where((chosen > 0) & (total > 0), value, 0.0)
+            else:
+                factor = 1.0 if self.scale is None else self.scale[k] / self.mean_scale
+                value = factor * r * r / (cos_l * self.total_area)
+        pdf[hit] = np.where(np.isfinite(value) & (cos_l > 0), value, 0.0)
+        return pdf
 
     def _facing(self, x, tri_index, direction_to_light):
         """1 where the emitter's lit side faces x along ``direction_to_light``."""
@@ -209,16 +289,7 @@ class TriangleEmitter:
         """Directions, shadow distances and irradiance estimates L cos(theta_x) / pdf."""
         count = len(x)
         if self.use_solid_angle:
-            a = self.tris[None, :, 0] - x[:, None]
-            b = self.tris[None, :, 1] - x[:, None]
-            c = self.tris[None, :, 2] - x[:, None]
-            omega = solid_angle(_normalize(a), _normalize(b), _normalize(c))  # (N, T)
-            # Triangles seen from behind (one-sided) or edge-on give nothing: skip them.
-            if not self.two_sided:
-                side = np.einsum("ntk,tk->nt", a, self.normals)
-                omega = np.where(side < 0, omega, 0.0)
-            if self.scale is not None:
-                omega = omega * self.scale[None, :]    # triangles by solid angle x factor
+            omega = self._solid_angles(x)   # (N, T), x the triangle's factor
             total = omega.sum(axis=1)
             cdf = np.cumsum(omega, axis=1)
             pick_u = u[:, 0] * total
@@ -365,6 +436,7 @@ def textured_emitters(name: str, scene, materials, triangles: np.ndarray, two_si
         scale = np.maximum(radiance[:, channel] / peak, TEXTURED_EMITTER_FLOOR)
         out.append(TriangleEmitter(label, corners, rgb, two_sided=two_sided, in_bvh=True,
                                    scale=scale, radiance_at=radiance_of(channel, peak)))
+        out[-1].channel = channel
     return out
 
 
@@ -426,6 +498,25 @@ class EllipseEmitter:
         for mask, fn in ((near, self.fan.sample), (~near, self._sample_area)):
             w[mask], dist[mask], e[mask] = fn(x[mask], n[mask], u[mask])
         return w, dist, e
+
+    def solid_angle_pdf(self, points, normals, wi):
+        """(N,) the density [1/sr] of ``sample``'s directions ``wi`` from ``points``: near the
+        light the fan's (``TriangleEmitter.solid_angle_pdf``), from afar the area sampling's
+        r^2 / (cos_l A) where wi meets the ellipse on its emitting side, else 0."""
+        x = np.asarray(points, np.float64).reshape(-1, 3)
+        w = np.asarray(wi, np.float64).reshape(-1, 3)
+        near = np.linalg.norm(x - self.center, axis=1) < self.near_distance
+        pdf = np.zeros(len(x))
+        if near.any():
+            pdf[near] = self.fan.solid_angle_pdf(x[near], None, w[near])
+        far = ~near
+        if far.any():
+            t, hit = self.intersect(x[far], w[far], np.inf)
+            cos_l = -(w[far] @ self.normal)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                value = t * t / (cos_l * self.area)
+            pdf[far] = np.where((hit > 0) & (cos_l > 0) & np.isfinite(value), value, 0.0)
+        return pdf
 
     def selection_weight(self, x, n):
         d = self.center - x
@@ -565,6 +656,41 @@ class SphereLight:
         ok = np.isfinite(weight) & (t > 0)
         return w, np.where(ok, t, 0.0), np.where(ok, weight, 0.0)
 
+    def solid_angle_pdf(self, points, normals, wi):
+        """(N,) the density [1/sr] of ``sample``'s directions ``wi`` from ``points`` with
+        ``normals``: the sphere's cone 1 / (2 pi (1 - cos theta_max)) where wi meets the
+        sphere (from inside, cos / pi about the normal); the facing disk's t^2 / (cos_l pi R^2)
+        where wi meets the disk; else 0. The spot's mask weights the estimate, not the pdf."""
+        x = np.asarray(points, np.float64).reshape(-1, 3)
+        w = np.asarray(wi, np.float64).reshape(-1, 3)
+        rel = self.center - x
+        d2 = _dot(rel, rel)
+        r2 = self.radius ** 2
+        b = _dot(w, rel)                                   # |rel| cos(angle to the centre)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            if self.sphere:
+                out = d2 > r2
+                s2 = np.where(out, r2 / np.where(out, d2, 1.0), 1.0)
+                omc = s2 / (1.0 + np.sqrt(np.maximum(0.0, 1.0 - s2)))
+                # wi inside the cone: 1 - cos(angle) <= 1 - cos theta_max, the angle's cosine
+                # b / d > 0 (precise form: 1 - cos = |w x rel|^2 / (d^2 (1 + cos))).
+                cos_a = b / np.sqrt(np.where(d2 > 0, d2, 1.0))
+                cross = np.cross(w, rel)
+                one_minus = _dot(cross, cross) / np.where(d2 > 0, d2, 1.0) / (1.0 + cos_a)
+                inside_cone = (cos_a > 0) & (one_minus <= omc)
+                pdf = np.where(out & inside_cone, 1.0 / (2.0 * np.pi * omc), 0.0)
+                if not out.all():
+                    n = np.asarray(normals, np.float64).reshape(-1, 3)
+                    pdf = np.where(out, pdf, np.maximum(_dot(n, w), 0.0) / np.pi)
+            else:
+                d = np.sqrt(d2)
+                cos_l = b / np.where(d > 0, d, 1.0)          # wi against the disk's normal
+                t = d / np.where(cos_l > 0, cos_l, 1.0)
+                q = t[:, None] * w - rel
+                hit = (cos_l > 0) & (d > 0) & (_dot(q, q) < r2)
+                pdf = np.where(hit, t * t / (cos_l * np.pi * r2), 0.0)
+        return np.where(np.isfinite(pdf), pdf, 0.0)
+
     def intersect(self, origins, directions, t_max):
         """Nearest hit t (N,) of rays with the light as Cycles intersects it (inf: none before
         ``t_max``), and the radiance factor there (1, or a spot's mask; 0 for no hit)."""
@@ -613,6 +739,13 @@ class SunCone:
     def selection_weight(self, x, n):
         return (self.rgb @ LUMINANCE) * (0.1 + np.maximum(n @ self.to_light, 0.0))
 
+    def solid_angle_pdf(self, points, normals, wi):
+        """(N,) 1 / (2 pi (1 - cos theta_max)) [1/sr] for directions ``wi`` inside the cone,
+        0 outside."""
+        w = np.asarray(wi, np.float64).reshape(-1, 3)
+        return np.where(w @ self.to_light >= self.cos_max,
+                        1.0 / (2.0 * np.pi * (1.0 - self.cos_max)), 0.0)
+
     def sample(self, x, n, u):
         local = sampling.square_to_cone(u, self.cos_max)
         t, b = self.frame
@@ -632,6 +765,11 @@ class WorldLight:
 
     def selection_weight(self, x, n):
         return np.full(len(x), self.rgb @ LUMINANCE)
+
+    def solid_angle_pdf(self, points, normals, wi):
+        """(N,) cos / pi [1/sr] about ``normals`` for directions ``wi`` (0 below)."""
+        n = np.asarray(normals, np.float64).reshape(-1, 3)
+        return np.maximum(_dot(n, np.asarray(wi, np.float64).reshape(-1, 3)), 0.0) / np.pi
 
     def sample(self, x, n, u):
         t, b = sampling.orthonormal_basis(n)
@@ -844,6 +982,11 @@ class LightSet:
 
         # Emissive meshes: one emitter per object, from triangles whose material emits.
         materials = MaterialTable(scene)
+        # Per scene triangle: its emitter's index in ``sampled`` (-1: it emits nothing).
+        self.emitter_of_triangle = np.full(len(scene.triangles), -1)
+        # Per scene triangle and colour channel: the emitter that samples that channel's
+        # light (a textured emitter is one per channel, ``textured_emitters``; -1: none).
+        self.channel_emitters = np.full((len(scene.triangles), 3), -1)
         if len(scene.triangles):
             emissive = materials.is_emissive[scene.material_ids]
             self.emissive_triangles = emissive
@@ -852,19 +995,27 @@ class LightSet:
                 keys = scene.object_ids[idx].astype(np.int64) * 65536 + scene.material_ids[idx]
                 for key in np.unique(keys):
                     sel = idx[keys == key]
+                    self.emitter_of_triangle[sel] = len(self.sampled)
                     oid, mid = int(key // 65536), int(key % 65536)
                     name = scene.object_names[oid] if oid < len(scene.object_names) else "Mesh"
                     surface = materials.at(np.array([mid]))
                     if materials.textured[mid]:
-                        self.sampled.extend(textured_emitters(
-                            name, scene, materials, sel, bool(surface.both_sides[0])))
+                        channels = textured_emitters(name, scene, materials, sel,
+                                                     bool(surface.both_sides[0]))
+                        for emitter in channels:
+                            self.channel_emitters[sel, emitter.channel] = len(self.sampled)
+                            self.sampled.append(emitter)
+                        self.emitter_of_triangle[sel] = self.channel_emitters[sel].max(axis=1)
                         continue
+                    self.channel_emitters[sel] = len(self.sampled)
                     self.sampled.append(TriangleEmitter(
                         name, scene.triangles[sel], surface.emitted_radiance[0],
                         two_sided=bool(surface.both_sides[0]), in_bvh=True))
         else:
             self.emissive_triangles = np.zeros(0, bool)
+        self.world_index = -1          # the world's index in ``sampled`` (-1: black world)
         if not scene.world.is_black:
+            self.world_index = len(self.sampled)
             if scene.world.environment is None and not scene.world.portals:
                 self.sampled.append(WorldLight(scene.world.radiance))
             else:
@@ -887,6 +1038,19 @@ class LightSet:
         w = np.where(np.isfinite(w), np.maximum(w, 0.0), 0.0)
         w += 0.02 * w.mean(axis=1, keepdims=True) + 1e-30
         return w / w.sum(axis=1, keepdims=True)
+
+    def sample_density(self, points, normals, wi, index, light_samples: int) -> np.ndarray:
+        """(N,) the density [1/sr] with which ``direct.direct_terms`` (``light_samples``
+        samples per point shared by the sampled lights) draws the directions ``wi`` from
+        light ``index`` of ``sampled`` at ``points`` with shading ``normals``: light_samples x
+        its selection probability (``selection_weights``) x its ``solid_angle_pdf``. The
+        light weight of multiple importance sampling (Veach 1997 §9.2.2, counts included)."""
+        x = np.asarray(points, np.float64).reshape(-1, 3)
+        n = np.asarray(normals, np.float64).reshape(-1, 3)
+        if len(x) == 0:
+            return np.zeros(0)
+        select = self.selection_weights(x, n)[:, index]
+        return light_samples * select * self.sampled[index].solid_angle_pdf(x, n, wi)
 
     def delta_rays(self, x, n):
         """For each delta light: (direction (N,3), distance (N,), scalar weight (N,), rgb (3,));
@@ -944,24 +1108,28 @@ def ray_visible(light) -> bool:
         (isinstance(light, TriangleEmitter) and not light.in_bvh)
 
 
-def seen_light_radiance(lights_or_scene, origins, directions, t_hit) -> np.ndarray:
+def seen_light_radiance(lights_or_scene, origins, directions, t_hit, with_index=False):
     """Radiance (N, 3) [W m^-2 sr^-1] of the lights that are not geometry but that rays
     (``origins`` (N, 3), unit ``directions`` (N, 3)) meet before ``t_hit`` (N,) (np.inf where
     the ray left the scene; ``ray_visible``: point / spot lights with a radius, a spot's mask
     on the ray's direction (Cycles ``spot_light_sample_from_intersection``), and area lights
     on their emitting side); the nearest light wins; 0 elsewhere. ``lights_or_scene``: a
     ``LightSet`` or a ``Scene``. For camera paths after a delta (mirror, smooth glass)
-    bounce, where no light sample could reach the light."""
+    bounce, where no light sample could reach the light, and after glossy bounces (weighted
+    against light samples). ``with_index``: also the index (N,) in ``sampled`` of the light
+    each ray sees (-1: none)."""
     lights = lights_or_scene if isinstance(lights_or_scene, LightSet) else LightSet(lights_or_scene)
     o = np.asarray(origins, np.float64).reshape(-1, 3)
     w = np.asarray(directions, np.float64).reshape(-1, 3)
     best = np.broadcast_to(np.asarray(t_hit, np.float64), (len(o),)).copy()
     out = np.zeros((len(o), 3))
-    for light in lights.sampled:
+    index = np.full(len(o), -1)
+    for li, light in enumerate(lights.sampled):
         if not ray_visible(light):
             continue
         t, factor = light.intersect(o, w, best)
         nearer = t < best
         best = np.where(nearer, t, best)
         out[nearer] = factor[nearer, None] * light.rgb[None]
-    return out
+        index[nearer] = li
+    return (out, index) if with_index else out

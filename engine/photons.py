@@ -714,7 +714,7 @@ def trace_photons(scene: Scene, accel, emitted: EmittedPhotons, rng: np.random.G
                 glossy = spec & params.camera_glossy
                 if glossy.any():
                     g = np.flatnonzero(glossy)
-                    wi, weight, _sharp = sample_glossy(
+                    wi, weight, _pdf = sample_glossy(
                         surfaces.materials, params.material[g], -d[g].astype(np.float64),
                         n[g].astype(np.float64), rng, ~flip_live[g])
                     new_dir[g] = wi

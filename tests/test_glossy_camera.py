@@ -5,9 +5,10 @@ directional albedo: L(wo) = sum_j w_j E_j(wo) + rho_d (1 - max E_layer(wo)) for 
 (``bsdf.glossy_material``: the lobe's own tables, ``MicrofacetReflection.albedo``) and a diffuse
 base below a Principled specular layer, which Cycles scales by one minus the layer's albedo.
 The camera is far away with a 0.6 degree field, so every pixel sees the plane at one view
-cosine mu. The render takes the world through the lobes' sampled rays (continuations; the
-world's light samples are left to the diffuse part), the diffuse part through light samples,
-so both paths and the layering are exercised.
+cosine mu. The glossy lobes take the world from their sampled rays and from the world's light
+samples, weighted by multiple importance sampling (``integrator``), the diffuse part from light
+samples alone, so both paths, the weights and the layering are exercised. (The tolerance
+below was measured before MIS, when the lobes took the world from their rays alone.)
 
 Cases: the Principled BSDF at Blender's defaults (dielectric layer over a 0.8 base), copper
 metal (Metallic 1, Roughness 0.3: a sharp lobe), Mix(Diffuse, Glossy 0.2), a white Glossy
