@@ -454,10 +454,16 @@ def test_radiometry_panel_shows_the_exporters_derived_values(registered):
     assert "0.100  0.200  0.300" in shown and "6.283  6.283  6.283" in shown
 
     # What the derivation approximates is shown with the values.
+    # A node the evaluator lacks is named; a supported texture on a metal's Base Color says
+    # what takes its mean (the metal lobe) and what follows it per hit (the diffuse).
+    tex = mat.node_tree.nodes.new("ShaderNodeTexBrick")
+    mat.node_tree.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
+    text = " ".join(labels(draw(panels.LANTERNA_MATERIAL_PT_radiometry, ctx)))
+    assert "Brick" in text and "Base Color" in text
     tex = mat.node_tree.nodes.new("ShaderNodeTexChecker")
     mat.node_tree.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
     text = " ".join(labels(draw(panels.LANTERNA_MATERIAL_PT_radiometry, ctx)))
-    assert "Checker Texture" in text and "Base Color" in text
+    assert "Base Color" in text and "driven by nodes" in text and "mean" in text
 
 
 # -- Light ------------------------------------------------------------------------------------
