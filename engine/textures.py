@@ -41,12 +41,14 @@ Numbers are clipped to the ranges export clips the socket values to (``PARAM_RAN
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 
 from . import nodes
 from .shaders import CLOSURE_KINDS, seed_reduction
 
-__all__ = ["MaterialTextures", "approximations", "interpolate_corners", "MEAN_SAMPLES",
+__all__ = ["MaterialTextures", "HitInputs", "approximations", "interpolate_corners", "MEAN_SAMPLES",
            "PARAM_RANGES", "EXACT_PARAMS"]
 
 # Area-uniform points per textured material for the means the lobes use.
@@ -78,6 +80,28 @@ def interpolate_corners(corner: np.ndarray, prim, bu, bv) -> np.ndarray:
     return c[:, 0] * (1.0 - u - v) + c[:, 1] * u + c[:, 2] * v
 
 
+class HitInputs(Mapping):
+    """The per-hit coordinates ``nodes.evaluate`` reads at hits (prim, bu, bv): each corner
+    attribute interpolated only when a node first asks for it, then kept."""
+
+    def __init__(self, corners: dict, prim, bu, bv):
+        self._corners, self._hits, self._done = corners, (prim, bu, bv), {}
+
+    def __getitem__(self, key):
+        if key not in self._done:
+            self._done[key] = interpolate_corners(self._corners[key], *self._hits)
+        return self._done[key]
+
+    def __contains__(self, key):
+        return key in self._corners
+
+    def __iter__(self):
+        return iter(self._corners)
+
+    def __len__(self):
+        return len(self._corners)
+
+
 def _as_param(value: np.ndarray, kind_default, graph, socket) -> np.ndarray:
     """A node output (N,) or (N, 3) as a parameter of the default's shape (Cycles' implicit
     conversions: colour -> number by luminance, vector -> number by the mean)."""
@@ -97,17 +121,18 @@ def _clip(param: str, value):
     return np.clip(value, low, high)
 
 
-def param_at(graph, kind: str, param: str, factors, inputs: dict, n: int) -> np.ndarray:
+def param_at(evaluator: "nodes.Evaluator", graph, kind: str, param: str, factors) -> np.ndarray:
     """The per-hit value (N,) or (N, 3) of one node-driven parameter: the product of its
-    factors, each a node output or a constant."""
+    factors, each a node output (of ``evaluator``, one batch of hits on ``graph``) or a
+    constant."""
     default = CLOSURE_KINDS[kind][param]
+    n = evaluator.n
     value = None
     for socket, constant in factors:
         if socket is None:
             part = np.asarray(constant, np.float64)
         else:
-            part = _as_param(nodes.evaluate(graph, tuple(socket), inputs, n), default, graph,
-                             socket)
+            part = _as_param(evaluator.value(tuple(socket)), default, graph, socket)
         value = part if value is None else value * part
     if isinstance(default, tuple):
         value = np.broadcast_to(value, (n, 3))
@@ -154,16 +179,16 @@ class MaterialTextures:
         for material_id in np.flatnonzero(self.textured):
             self._means(int(material_id))
 
-    def inputs(self, prim, bu, bv) -> dict:
-        """The per-hit coordinates ``nodes.evaluate`` reads, at hits (prim, bu, bv)."""
-        return {key: interpolate_corners(corner, prim, bu, bv)
-                for key, corner in self.corners.items()}
+    def inputs(self, prim, bu, bv) -> HitInputs:
+        """The per-hit coordinates ``nodes.evaluate`` reads, at hits (prim, bu, bv)
+        (interpolated when first read)."""
+        return HitInputs(self.corners, prim, bu, bv)
 
     def closures_at(self, material_id: int, prim, bu, bv) -> list:
-        """The material's closures with per-hit parameters at hits (prim, bu, bv)."""
-        n = len(prim)
+        """The material's closures with per-hit parameters at hits (prim, bu, bv); the
+        material's graph is evaluated once for all of them (each node once)."""
         graph = self.graphs[material_id]
-        inputs = self.inputs(prim, bu, bv)
+        evaluator = nodes.Evaluator(graph, self.inputs(prim, bu, bv), len(prim))
         out = []
         for c in self.scene.materials[material_id].closures:
             if not c.textures:
@@ -171,7 +196,7 @@ class MaterialTextures:
                 continue
             params = dict(c.params)
             for param, factors in c.textures.items():
-                params[param] = param_at(graph, c.kind, param, factors, inputs, n)
+                params[param] = param_at(evaluator, graph, c.kind, param, factors)
             out.append(c.at_hits(params))
         return out
 
