@@ -30,7 +30,7 @@ Parameters
     photon benchmark), ``--json FILE``. ``--calibrate`` (measure this machine's rates for the
     cost estimate, then check it on the seed scenes) and ``--check-estimate`` (the check
     alone) hand over to ``bench/calibrate.py``, ``--sweep`` to ``bench/sweep.py``,
-    ``--materials`` to ``bench/materials.py``, ``--textures`` to ``bench/textures.py``,
+    ``--materials`` to ``bench/materials.py``, ``--textures`` to ``bench/texture_cost.py``,
     ``--vs-cycles`` to ``bench/vs_cycles.py`` and
     ``--cache-index`` to ``bench/cache_index.py``.
 """
@@ -55,7 +55,7 @@ def main(argv=None) -> int:
         from .materials import main as materials_main
         return materials_main([a for a in argv if a != "--materials"])
     if "--textures" in argv:  # issue 24: what textures add to final (textures.py)
-        from .textures import main as textures_main
+        from .texture_cost import main as textures_main
         return textures_main([a for a in argv if a != "--textures"])
     if "--calibrate" in argv or "--check-estimate" in argv:  # issue 6: rates (calibrate.py)
         from .calibrate import main as calibrate_main
@@ -85,7 +85,7 @@ def main(argv=None) -> int:
     parser.add_argument("--textures", action="store_true",
                         help="what texture evaluation adds to the textured room's final, "
                              "against the same scene with each texture's mean; see "
-                             "bench/textures.py (--textures --help)")
+                             "bench/texture_cost.py (--textures --help)")
     parser.add_argument("--calibrate", action="store_true",
                         help="measure this machine's rates for the cost estimate, write them "
                              "and check the estimate on the seed scenes; see "

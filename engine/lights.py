@@ -27,9 +27,9 @@ Sampling
     ``SOLID_ANGLE_MIN`` sr are sampled by area instead (Arvo's map loses precision there).
     The solid angles of all triangles at N points are formed from the unit directions to the
     emitter's distinct vertices ((N, V) component arrays; corners that triangles share are
-    normalised once). Larger meshes choose a triangle by area with ``searchsorted`` on cumulative areas (the
-    seed's "area line") and an area-uniform point (DESIGN.md §4). Disks and ellipses are
-    sampled by area through the concentric map. Suns with an angle sample their cone
+    normalised once). Larger meshes choose a triangle by area with ``searchsorted`` on
+    cumulative areas (the seed's "area line") and an area-uniform point (DESIGN.md §4). Disks
+    and ellipses are sampled by area through the concentric map. Suns with an angle sample their cone
     uniformly; the world is sampled with cosine-distributed directions (E = pi L V). Sphere
     lights sample the cone they subtend uniformly (the standard sphere-light sampling; Cycles
     ``point_light_sample``), cosine directions from inside, and their facing disk by area; a

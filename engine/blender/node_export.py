@@ -18,9 +18,9 @@ encoded values and converts afterwards, as Cycles does with its byte textures); 
 and the linear spaces as "linear"; any other colour space on a byte image is reported through
 ``warn`` and read as sRGB. An 8-bit image is then held as its bytes (uint8, 4 B a texel), a
 float image as float16 where that is lossless and float32 otherwise (``nodes.stored_pixels``);
-the float32 read is let go once the image is made. Packed and file images read the same way (``pixels`` loads them);
-tiled (UDIM) images and sequences are reported and left out (the Image Texture node then gives
-Cycles' missing-image magenta).
+the float32 read is let go once the image is made. Packed and file images read the same way
+(``pixels`` loads them); tiled (UDIM) images and sequences are reported and left out (the
+Image Texture node then gives Cycles' missing-image magenta).
 
 Parameters: ``warn`` (callable taking one message; default: ignore), ``images`` (a dict cache
 name -> ``nodes.Image``, shared between materials so each image is read once).

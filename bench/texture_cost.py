@@ -118,7 +118,7 @@ def section_markdown(data: dict) -> str:
     lines = [SECTION_TITLE, "",
              f"Measured {m['date']} on {m['cpu_count']} CPUs ({m['cpu']}, {m['platform']}{load}), "
              f"Blender {m.get('blender', '?')}, {data['minutes']:.0f} min. Regenerate with "
-             f"`{COMMAND}` from a checkout (`bench/textures.py`, whose docstring defines every "
+             f"`{COMMAND}` from a checkout (`bench/texture_cost.py`, whose docstring defines every "
              "figure; it rewrites this section only). `tests/texture_scenes.py`'s textured room "
              f"(80 × 60 px, three 8-bit sRGB images) at `final`, seed 1, {data['repeat']} renders "
              "each, alternating, against the same exported scene with each textured material "

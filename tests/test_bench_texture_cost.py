@@ -1,4 +1,4 @@
-"""``lanterna bench --textures`` (bench/textures.py): its pure parts, no renders, no bpy.
+"""``lanterna bench --textures`` (bench/texture_cost.py): its pure parts, no renders, no bpy.
 
 * ``mean_scene`` turns every textured material into an untextured one whose seed reduction
   and closures are the textured one's means (``MaterialTable`` of the twin then holds the
@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lanterna.bench import textures
+from lanterna.bench import texture_cost as textures
 from lanterna.engine.bsdf import MaterialTable
 
 from test_estimate import _textured_room
