@@ -12,6 +12,8 @@ extension zips leave this folder out, and ``lanterna bench`` finds it only in a 
     ``vs_cycles.py``         ``--vs-cycles``: the ``final`` preset against Cycles
     ``materials.py``         ``--materials``: ``final``'s time against Cycles' at the same
                              error on the material scenes (issue 23)
+    ``texture_cost.py``      ``--textures``: what texture evaluation adds to the textured
+                             room's ``final`` against its textures' means (issue 24)
     ``cache_index.py``       ``--cache-index``: the irradiance cache's grid against its kd-tree
     ``validation.py``        ``--validation``: writes docs/validation.md
     ``performance.py``       ``--performance``: writes docs/performance.md (runs the sweep)

@@ -23,6 +23,10 @@ What it computes (``lanterna bench --calibrate`` / ``lanterna bench --check-esti
        preset's size, about 4M stored, beside the cache renders' 1M: ``STORE_KEYS``; its
        emission is pooled with the cache renders' into the emission rate, measured so at a
        preset's size too); and a photon-map look-up render.
+    3. image look-ups: the calibration room with its floor's Base Color an 8-bit sRGB
+       256 x 256 image (Linear), read through ``MaterialTable.at`` at 2^20 random floor hits
+       in chunks of 65,536 over the worker threads (the per-hit material evaluation
+       included): seconds per look-up.
     Writes the rates (JSON) to ``--rates-file`` (default ``$XDG_CACHE_HOME/lanterna/
     rates.json`` or ``~/.cache/lanterna/rates.json``) and prints them.
 
@@ -285,6 +289,68 @@ def _large_map(workers, tell, repeat=REPEAT) -> tuple[dict, float]:
             float(emit))
 
 
+TEXTURE_SIZE = 256               # the calibration floor's image: 256 x 256 texels, 8-bit sRGB
+TEXTURE_HITS = 1 << 20           # hits at which it is read, in chunks of TEXTURE_CHUNK
+TEXTURE_CHUNK = 1 << 16
+
+
+def textured_calibration_scene(resolution=(160, 120)):
+    """The calibration room whose floor is a Principled BSDF with its Base Color an 8-bit
+    sRGB image (``TEXTURE_SIZE`` square, random texels, Linear, Repeat) tiled 4 times through
+    its UV map: one image look-up per hit on the floor."""
+    from ..engine import nodes
+    from ..engine.shaders import Closure
+
+    scene = calibration_scene(resolution)
+    rng = np.random.default_rng(2)
+    graph = nodes.Graph()
+    graph.nodes["Image"] = nodes.Node(
+        "ShaderNodeTexImage", "Image", {"image": "calibration", "interpolation": "Linear",
+                                        "extension": "REPEAT"},
+        {"Vector": ("VECTOR", [0.0, 0.0, 0.0])}, {"Color": "RGBA", "Alpha": "VALUE"})
+    graph.images["calibration"] = nodes.Image(
+        rng.integers(0, 256, (TEXTURE_SIZE, TEXTURE_SIZE, 4)).astype(np.uint8), "srgb")
+    closure = Closure("principled")
+    closure.textures["base_color"] = [(("Image", "Color"), None)]
+    floor = scene.materials[0]
+    floor.closures, floor.graph = (closure,), graph
+    uv = np.zeros((len(scene.triangles), 3, 2), np.float32)
+    uv[:2] = scene.triangles[:2, :, :2] * (4.0 / 5.0)             # the floor: x, y in metres
+    scene.corner_attributes = {"uv": uv}
+    return scene
+
+
+def _texture_rate(workers, tell, repeat=REPEAT) -> float:
+    """Seconds per image look-up: ``MaterialTable.at(...).diffuse`` at ``TEXTURE_HITS``
+    random hits on the textured floor (``textured_calibration_scene``), in chunks over
+    ``workers`` threads as the stages read materials; the fastest of ``repeat`` runs."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from ..engine.bsdf import MaterialTable
+
+    scene = textured_calibration_scene()
+    table = MaterialTable(scene)
+    rng = np.random.default_rng(3)
+    prim = rng.integers(0, 2, TEXTURE_HITS)
+    su, v = np.sqrt(rng.random(TEXTURE_HITS)), rng.random(TEXTURE_HITS)
+    bu, bv = su * (1 - v), su * v
+    mids = scene.material_ids[prim]
+    chunks = [slice(a, a + TEXTURE_CHUNK) for a in range(0, TEXTURE_HITS, TEXTURE_CHUNK)]
+
+    def read(c):
+        return table.at(mids[c], prim[c], bu[c], bv[c]).diffuse
+
+    tell(f"texture look-ups at {TEXTURE_HITS:,} hits")
+    best = None
+    with ThreadPoolExecutor(workers) as pool:
+        for _ in range(max(1, repeat)):
+            t0 = time.perf_counter()
+            list(pool.map(read, chunks))
+            seconds = time.perf_counter() - t0
+            best = seconds if best is None else min(best, seconds)
+    return best / TEXTURE_HITS
+
+
 def measure_rates(threads=0, tell=print, repeat=REPEAT) -> est.Rates:
     """Measure every rate of ``estimate.RATE_KEYS`` on this machine (module docstring), each
     render ``repeat`` times, the fastest counting."""
@@ -385,6 +451,7 @@ def measure_rates(threads=0, tell=print, repeat=REPEAT) -> est.Rates:
     cam = stages["camera"]
     r["photon_lookup"] = max(tiny, (cam["seconds"] - direct_part(cam))
                              / max(cam["photon_queries"], 1))
+    r["texture_lookup"] = max(tiny, _texture_rate(workers, tell, repeat))
     return est.Rates(seconds={k: float(r[k]) for k in est.RATE_KEYS}, workers=workers,
                      cores=os.cpu_count() or 1,
                      raw={**{k: raw[k] for k in est.RAW_KEYS}, **store},

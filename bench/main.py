@@ -30,7 +30,8 @@ Parameters
     photon benchmark), ``--json FILE``. ``--calibrate`` (measure this machine's rates for the
     cost estimate, then check it on the seed scenes) and ``--check-estimate`` (the check
     alone) hand over to ``bench/calibrate.py``, ``--sweep`` to ``bench/sweep.py``,
-    ``--materials`` to ``bench/materials.py``, ``--vs-cycles`` to ``bench/vs_cycles.py`` and
+    ``--materials`` to ``bench/materials.py``, ``--textures`` to ``bench/texture_cost.py``,
+    ``--vs-cycles`` to ``bench/vs_cycles.py`` and
     ``--cache-index`` to ``bench/cache_index.py``.
 """
 from __future__ import annotations
@@ -53,6 +54,9 @@ def main(argv=None) -> int:
     if "--materials" in argv:  # issue 23: final against Cycles on the material scenes
         from .materials import main as materials_main
         return materials_main([a for a in argv if a != "--materials"])
+    if "--textures" in argv:  # issue 24: what textures add to final (textures.py)
+        from .texture_cost import main as textures_main
+        return textures_main([a for a in argv if a != "--textures"])
     if "--calibrate" in argv or "--check-estimate" in argv:  # issue 6: rates (calibrate.py)
         from .calibrate import main as calibrate_main
         return calibrate_main(argv)
@@ -78,6 +82,10 @@ def main(argv=None) -> int:
     parser.add_argument("--materials", action="store_true",
                         help="final's time against Cycles' for the same error on the material "
                              "scenes; see bench/materials.py (--materials --help)")
+    parser.add_argument("--textures", action="store_true",
+                        help="what texture evaluation adds to the textured room's final, "
+                             "against the same scene with each texture's mean; see "
+                             "bench/texture_cost.py (--textures --help)")
     parser.add_argument("--calibrate", action="store_true",
                         help="measure this machine's rates for the cost estimate, write them "
                              "and check the estimate on the seed scenes; see "

@@ -111,6 +111,8 @@ class MaterialTable:
         # and the lobes hold their means over the surface (``engine/textures.py``).
         self.textures = MaterialTextures(scene)
         self.textured = self.textures.textured
+        self.textured_reflectance = self.textures.textured_part("reflectance")
+        self.textured_emission = self.textures.textured_part("emission")
         for material_id, (d, s, e) in self.textures.mean_reduction.items():
             self.diffuse[material_id], self.specular[material_id] = d, s
             self.exitance[material_id] = e
@@ -161,15 +163,21 @@ class MaterialTable:
         return SurfaceParams(self, np.asarray(material_ids), prim, bu, bv)
 
 
-# SurfaceParams slots that textures make per-hit (the rest stay per material).
-TEXTURED_SLOTS = ("diffuse", "specular", "exitance", "diffuse_over_pi", "emitted_radiance",
-                  "transport_diffuse", "transport_specular")
+# SurfaceParams slots that textures make per-hit (the rest stay per material): those of the
+# reflectance and those of the emission, each evaluated only when first asked for (a light
+# sample or a photon leaving an emitter reads no reflectance, a gather ray meeting an
+# emitter no emission texture).
+REFLECTANCE_SLOTS = ("diffuse", "specular", "diffuse_over_pi", "transport_diffuse",
+                     "transport_specular")
+EMISSION_SLOTS = ("exitance", "emitted_radiance")
+TEXTURED_SLOTS = REFLECTANCE_SLOTS + EMISSION_SLOTS
 
 
 class SurfaceParams:
     """Material parameters per hit (N,) or (N, 3), each fetched when first asked for; at hits
     on textured materials (``MaterialTable.textured``) with their (prim, bu, bv) given, the
-    ``TEXTURED_SLOTS`` hold the per-hit values (``textures.MaterialTextures.reduction``)."""
+    ``TEXTURED_SLOTS`` hold the per-hit values (``textures.MaterialTextures.reflectance`` and
+    ``exitance``, each part evaluated when one of its slots is first read)."""
 
     def __init__(self, table: MaterialTable, material: np.ndarray, prim=None, bu=None,
                  bv=None):
@@ -184,30 +192,46 @@ class SurfaceParams:
 
     def _take(self, name):
         if name not in self._cache:
-            if self.hits is not None and name in TEXTURED_SLOTS:
-                self._textured_slots()
+            if self.hits is not None and name in REFLECTANCE_SLOTS:
+                self._reflectance_slots()
+            elif self.hits is not None and name in EMISSION_SLOTS:
+                self._emission_slots()
             else:
                 self._cache[name] = np.take(getattr(self.table, name), self.material, axis=0)
         return self._cache[name]
 
-    def _textured_slots(self) -> None:
-        """Every ``TEXTURED_SLOTS`` entry: the per-material rows, with the rows of hits on
-        textured materials replaced by their per-hit values."""
+    def _textured_hits(self, textured: np.ndarray):
+        """(material id, indices of the hits on it) for the materials of these hits that
+        ``textured`` (M,) marks."""
+        material = self.material
+        for material_id in np.unique(material[textured[material]]):
+            yield int(material_id), np.flatnonzero(material == material_id)
+
+    def _reflectance_slots(self) -> None:
+        """The ``REFLECTANCE_SLOTS``: the per-material rows, with the rows of hits on
+        materials whose reflectance is node-driven replaced by their per-hit values."""
         table, material = self.table, self.material
         diffuse = np.take(table.diffuse, material, axis=0)
         specular = np.take(table.specular, material, axis=0)
-        exitance = np.take(table.exitance, material, axis=0)
         prim, bu, bv = self.hits
-        for material_id in np.unique(material[table.textured[material]]):
-            at = np.flatnonzero(material == material_id)
-            d, s, e = table.textures.reduction(int(material_id), prim[at], bu[at], bv[at])
-            diffuse[at], specular[at], exitance[at] = d, s, e
+        for material_id, at in self._textured_hits(table.textured_reflectance):
+            diffuse[at], specular[at] = table.textures.reflectance(material_id, prim[at],
+                                                                   bu[at], bv[at])
         cache = self._cache
-        cache["diffuse"], cache["specular"], cache["exitance"] = diffuse, specular, exitance
+        cache["diffuse"], cache["specular"] = diffuse, specular
         cache["diffuse_over_pi"] = diffuse / np.pi
-        cache["emitted_radiance"] = exitance / np.pi
         cache["transport_diffuse"] = diffuse * np.take(table.layer_kept, material, axis=0)
         cache["transport_specular"] = specular + np.take(table.layer_albedo, material, axis=0)
+
+    def _emission_slots(self) -> None:
+        """The ``EMISSION_SLOTS``, as ``_reflectance_slots`` for node-driven emission."""
+        table, material = self.table, self.material
+        exitance = np.take(table.exitance, material, axis=0)
+        prim, bu, bv = self.hits
+        for material_id, at in self._textured_hits(table.textured_emission):
+            exitance[at] = table.textures.exitance(material_id, prim[at], bu[at], bv[at])
+        self._cache["exitance"] = exitance
+        self._cache["emitted_radiance"] = exitance / np.pi
 
     diffuse = property(lambda self: self._take("diffuse"))
     specular = property(lambda self: self._take("specular"))

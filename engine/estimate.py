@@ -76,6 +76,13 @@ the cache is placed over it, so a tile (render border) renders as its part of th
                            look-up.
     gather rays per point  G = M N (1 + ``gather_guided``)
     shadow photons         ``auto_shadow_photon_count`` (100k-1M, from area and extent)
+    image look-ups         per surface hit t = the image look-ups of each material's node-driven
+                           reflectance (``textures.lookups_per_hit``: the Image Texture nodes
+                           upstream; procedural-only 1) weighted by its share of the area; per
+                           photon or light sample e = those of its emission weighted by its
+                           share of the lights' luminance flux. photons: (N e + c rays t);
+                           cache: (F + records G) t; camera: (camera + specular rays +
+                           gathered G) t + light samples e (penumbra samples not counted)
     =====================  =================================================================
 
 Time [s] (rates: seconds per unit, measured with ``rates.workers`` threads)
@@ -89,6 +96,8 @@ Time [s] (rates: seconds per unit, measured with ``rates.workers`` threads)
     camera = camera rays r_camera_sample + specular rays r_camera_sample + delta shadow rays
              r_shadow_ray + light samples r_light_sample + interpolated r_cache_lookup +
              gathered (G r_gather_ray + r_gather_point) + photon-map look-ups r_photon_lookup
+    + image look-ups r_texture_lookup in photons, irradiance_cache and camera (the
+    ``textures`` line of the table sums them)
     Threads: the parallel parts (photon rays, estimates, gathers, camera, shadow photons)
     scale by W_rates / W (both at most the cores); the rest runs on one thread.
     Triangles: the share of a ray's cost that is Embree's traversal grows with ln T: the
@@ -131,6 +140,11 @@ Memory [bytes] (keeps: held until the render ends; working: while the stage runs
                        (W min(524288, gathered per batch x G) x 500) + photon look-ups
                        (W 8192 k 60)
     The peak is the largest (keeps of the stages so far + the stage's working memory).
+    Textures: the texels of the distinct images the materials' graphs hold (``nodes.Image``
+    as held: uint8, float16 or float32; an image shared between materials once), in
+    ``SceneFacts.texture_bytes``, the report's ``texture_bytes`` and the table's ``textures``
+    line; like the triangles they are the scene's, in memory before the render, so not in its
+    peak (``available_memory`` already leaves them out).
     Checked with tracemalloc (which sees numpy's allocations, not Embree's or the kd-trees')
     on the seed scenes, final preset: peak 502 MB measured against 505 MB predicted (Scene 1,
     640x480), 789 against 741 MB (Scene 2, 160x120); per stage 0.85-1.26 of the measured.
@@ -157,12 +171,14 @@ import math
 import os
 import sys
 import time
+import dataclasses
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 
+from . import nodes
 from .bsdf import roulette_probabilities
 from .passes import LIGHT_PASS_NAMES
 from .lights import LUMINANCE, area_light_triangles, solid_angle
@@ -172,6 +188,7 @@ from .photons import auto_photon_count
 from .plan import make_plan
 from .scene import AreaLight, PointLight, SceneError, SpotLight, SunLight
 from .settings import RenderSettings, auto_lookups, block_side
+from .textures import lookups_per_hit
 from .shadow_photons import (AUTO_SPACING, DEFAULT_K, DEFAULT_MARGIN, MAX_AUTO_COUNT,
                              MIN_AUTO_COUNT, neighbours_queried)
 
@@ -195,6 +212,8 @@ RATE_KEYS = {
     "light_sample": "camera: per sample of a sampled light (selection, sample, shadow ray)",
     "cache_lookup": "camera: per look-up interpolated from cache records",
     "photon_lookup": "camera: per photon-map estimate at a hit, k = 50",
+    "texture_lookup": "textures: per image look-up at a hit (8-bit, Linear; the material's "
+                      "per-hit evaluation included)",
 }
 RAW_KEYS = ("triangles_small", "triangles_large", "incoherent_small", "incoherent_large",
             "coherent_small", "coherent_large")
@@ -204,7 +223,7 @@ STORE_KEYS = ("stored_small", "stored_large", "store_small", "store_large")
 RAW_GROUPS = (RAW_KEYS, STORE_KEYS)
 PARALLEL_RATES = {"photon_ray", "radiance_estimate", "gather_ray", "gather_point",
                   "shadow_photon", "camera_sample", "shadow_ray", "light_sample",
-                  "cache_lookup", "photon_lookup"}
+                  "cache_lookup", "photon_lookup", "texture_lookup"}
 
 # Memory per unit [bytes] (module docstring).
 BVH_BYTES_PER_TRIANGLE = 140
@@ -412,6 +431,9 @@ class SceneFacts:
     diffuse: list                     # per material: rho_d (RGB)
     specular: list                    # per material: rho_s (RGB)
     has_emission: bool
+    texture_bytes: int = 0            # the images' texels, each image once [bytes]
+    texture_lookups: float = 0.0      # image look-ups per surface hit (area-weighted)
+    emission_lookups: float = 0.0     # image look-ups per photon / light sample of the lights
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -419,7 +441,8 @@ class SceneFacts:
     @classmethod
     def from_dict(cls, data: dict) -> "SceneFacts":
         fields_ = cls.__dataclass_fields__
-        out = cls(**{k: data[k] for k in fields_})
+        out = cls(**{k: data[k] for k in fields_ if k in data or fields_[k].default is
+                     dataclasses.MISSING})
         out.window = tuple(int(v) for v in out.window)
         out.frame = tuple(int(v) for v in out.frame)
         out.border = tuple(int(v) for v in out.border)
@@ -569,6 +592,8 @@ def scene_facts(scene) -> SceneFacts:
             sampled.append(("mesh", True, _bbox_size(tris[idx[keys == key]])))
     if not scene.world.is_black:
         sampled.append(("world", True, 0.0))
+    texture_bytes, texture_lookups, emission_lookups = _texture_facts(
+        scene, area_m, exitance, extent)
     w, h = scene.camera.window_size
     fw, fh = scene.camera.resolution
     return SceneFacts(triangles=int(count), window=(int(w), int(h)), frame=(int(fw), int(fh)),
@@ -579,7 +604,38 @@ def scene_facts(scene) -> SceneFacts:
                       closure=float(np.clip(closure, 0.0, 1.0)),
                       delta_lights=int(delta), sampled_lights=sampled,
                       diffuse=diffuse.tolist(), specular=specular.tolist(),
-                      has_emission=bool(emissive_materials.any()))
+                      has_emission=bool(emissive_materials.any()),
+                      texture_bytes=texture_bytes, texture_lookups=texture_lookups,
+                      emission_lookups=emission_lookups)
+
+
+def _texture_facts(scene, area_m, exitance, extent) -> tuple[int, float, float]:
+    """(texture bytes, image look-ups per surface hit, per photon or light sample): the
+    texels of the distinct images the materials' graphs hold (``nodes.image_bytes``: an image
+    shared between materials once); the look-ups of each material's reflectance
+    (``textures.lookups_per_hit``) weighted by its share of the area; those of its emission
+    weighted by its share of the lights' luminance flux (emissive meshes: pi M A per side;
+    point and spot lights their flux, area lights their power, suns their irradiance over
+    the bounds' disc; the world left out)."""
+    materials = scene.materials
+    graphs = [getattr(m, "graph", None) for m in materials]
+    if not any(g is not None for g in graphs):
+        return 0, 0.0, 0.0
+    looks = np.array([lookups_per_hit(m) for m in materials], np.float64).reshape(-1, 2)
+    total = float(area_m.sum())
+    per_hit = float(area_m[:len(looks)] @ looks[:, 0]) / total if total > 0 else 0.0
+    both = np.array([2.0 if m.emit_both_sides else 1.0 for m in materials])
+    mesh = (exitance[:len(materials)] @ LUMINANCE) * area_m[:len(materials)] * both
+    flux = float(mesh.sum())
+    for light in scene.lights:
+        if isinstance(light, (PointLight, SpotLight)):
+            flux += float(LUMINANCE @ light.flux)
+        elif isinstance(light, AreaLight):
+            flux += float(LUMINANCE @ light.power)
+        elif isinstance(light, SunLight):
+            flux += float(LUMINANCE @ light.irradiance) * np.pi * (extent / 2) ** 2
+    per_emitted = float(mesh @ looks[:, 1]) / flux if flux > 0 else 0.0
+    return nodes.image_bytes(graphs), per_hit, per_emitted
 
 
 def plan_for(facts: SceneFacts, settings):
@@ -628,6 +684,7 @@ class Estimate:
     workers: int
     available_bytes: int | None = None
     warnings: list = field(default_factory=list)
+    texture_seconds: float = 0.0       # the image look-ups' share of ``seconds``
 
     def biggest(self, n: int = 2) -> list:
         """The ``n`` stages whose memory (keeps + working) is largest: (name, bytes)."""
@@ -644,7 +701,10 @@ class Estimate:
                 "peak_stage": self.peak_stage, "available_bytes": self.available_bytes,
                 "workers": self.workers, "rates": self.rates_source,
                 "stages": {k: v.to_dict() for k, v in self.stages.items()},
-                "facts": self.facts.to_dict(), "warnings": list(self.warnings)}
+                "facts": self.facts.to_dict(), "warnings": list(self.warnings),
+                "texture_bytes": int(self.facts.texture_bytes),
+                "texture_seconds": round(self.texture_seconds, 4)}
+
 
     def table(self) -> str:
         """The per-stage table (time, memory kept and working memory, counts) and totals."""
@@ -658,6 +718,13 @@ class Estimate:
                  if self.available_bytes is not None else "")
         lines.append(f"{'total':<20}{format_seconds(self.seconds):>10}  peak memory "
                      f"{format_bytes(self.peak_bytes)} (during {self.peak_stage}){avail}")
+        if self.facts.texture_bytes or self.texture_seconds:
+            looks = sum(float(v.counts.get("texture_lookups", 0.0))
+                        for v in self.stages.values())
+            lines.append(f"{'textures':<20}{format_seconds(self.texture_seconds):>10}"
+                         f"{format_bytes(self.facts.texture_bytes):>11}  {_short(looks)} image "
+                         "look-ups (their time is in the stages above; the texels are the "
+                         "scene's, held before the render and not in its peak)")
 
         return "\n".join(lines)
 
@@ -805,10 +872,13 @@ def estimate_from_facts(facts: SceneFacts, settings, rates: Rates | None = None,
         if reused:
             add("photons", 0.0, emitted=0, reused=1)
         else:
+            looks = emitted * facts.emission_lookups + rays * facts.closure * facts.texture_lookups
             add("photons", emitted * r["photon_emit"] + rays * r["photon_ray"]
-                + stored_all * (r["photon_store"] + r["shadow_ray"]), stored * PHOTON_BYTES,
+                + stored_all * (r["photon_store"] + r["shadow_ray"])
+                + looks * r["texture_lookup"], stored * PHOTON_BYTES,
                 stored_all * PHOTON_BUILD_BYTES + min(W, 1 + emitted // 131072)
-                * PHOTON_CHUNK_BYTES, emitted=int(emitted), photon_rays=rays, stored=stored)
+                * PHOTON_CHUNK_BYTES, emitted=int(emitted), photon_rays=rays, stored=stored,
+                **_nonzero(texture_lookups=looks))
         if plan["radiance_estimates"]:
             n_est = pc["estimates"]
             add("radiance_estimates", n_est * r["radiance_estimate"] * k_factor,
@@ -821,10 +891,12 @@ def estimate_from_facts(facts: SceneFacts, settings, rates: Rates | None = None,
             if reused:
                 add("irradiance_cache", 0.0, records=records, reused=1)
             else:
-                add("irradiance_cache", F * r["cache_pixel"] + records * per_gather,
-                    records * RECORD_BYTES,
+                looks = (F + records * gather_rays) * facts.texture_lookups
+                add("irradiance_cache", F * r["cache_pixel"] + records * per_gather
+                    + looks * r["texture_lookup"], records * RECORD_BYTES,
                     F * CACHE_PIXEL_BYTES + W * GATHER_CHUNK_POINTS * gather_rays
-                    * GATHER_RAY_BYTES, records=records, gather_rays=records * gather_rays)
+                    * GATHER_RAY_BYTES, records=records, gather_rays=records * gather_rays,
+                    **_nonzero(texture_lookups=looks))
     if plan["shadow_photons"]:
         radius = AUTO_SPACING * max(facts.extent, 1e-30)
         count = int(np.clip(neighbours_queried(DEFAULT_K, DEFAULT_MARGIN) * facts.area
@@ -838,7 +910,7 @@ def estimate_from_facts(facts: SceneFacts, settings, rates: Rates | None = None,
     # camera
     wanted = parse_passes(passes)
     if not camera:
-        return _finish(stages, plan, facts, s, rates, W, available)
+        return _finish(stages, plan, facts, s, rates, W, available, r["texture_lookup"])
     camera_rays = shaded * spp
     depth = s.max_specular_depth if plan["specular"] else 0
     spec = min(facts.specular_share, 0.999)
@@ -867,17 +939,21 @@ def estimate_from_facts(facts: SceneFacts, settings, rates: Rates | None = None,
     usage = 16 * P if "CacheUsage" in wanted and plan["irradiance_cache"] else 0
     if set(wanted) & set(LIGHT_PASS_NAMES):
         usage += len(LIGHT_PASS_NAMES) * 24 * P
+    texture_lookups = ((camera_rays + specular_rays + gathered * gather_rays)
+                       * facts.texture_lookups + light_samples * facts.emission_lookups)
     counts = dict(camera_rays=camera_rays)
     for name, value in (("specular_rays", specular_rays), ("shadow_rays", delta_rays),
                         ("light_samples", light_samples), ("lookups", lookups),
                         ("interpolated", interpolated), ("gathered", gathered),
-                        ("photon_lookups", photon_lookups)):
+                        ("photon_lookups", photon_lookups),
+                        ("texture_lookups", texture_lookups)):
         if value:
             counts[name] = value
     add("camera", (camera_rays + specular_rays) * r["camera_sample"]
         + delta_rays * r["shadow_ray"] + light_samples * r["light_sample"]
         + interpolated * r["cache_lookup"] + gathered * per_gather
-        + photon_lookups * r["photon_lookup"] * k_factor,
+        + photon_lookups * r["photon_lookup"] * k_factor
+        + texture_lookups * r["texture_lookup"],
         (1 + split) * P * PIXEL_BUFFER_BYTES + usage,
         running * batch_samples * SAMPLE_WORK_BYTES + gather_work + lookup_work, **counts)
     diagnostic = set(wanted) - {"Emission", "Direct", "Indirect"}
@@ -888,7 +964,12 @@ def estimate_from_facts(facts: SceneFacts, settings, rates: Rates | None = None,
         add("passes", seconds, len(diagnostic) * P * PIXEL_BUFFER_BYTES, P * CACHE_PIXEL_BYTES,
             passes=len(diagnostic))
 
-    return _finish(stages, plan, facts, s, rates, W, available)
+    return _finish(stages, plan, facts, s, rates, W, available, r["texture_lookup"])
+
+
+def _nonzero(**counts) -> dict:
+    """The counts that are not zero (a stage lists texture look-ups only where there are)."""
+    return {k: v for k, v in counts.items() if v}
 
 
 def _photon_counts(facts: SceneFacts, s, plan, pixels: int) -> dict:
@@ -907,9 +988,10 @@ def _photon_counts(facts: SceneFacts, s, plan, pixels: int) -> dict:
                 estimates=estimates)
 
 
-def _finish(stages, plan, facts, settings, rates, workers, available) -> Estimate:
+def _finish(stages, plan, facts, settings, rates, workers, available,
+            texture_rate: float = 0.0) -> Estimate:
     """Totals; the peak is the largest keeps of the stages so far + a stage's working
-    memory."""
+    memory; ``texture_rate`` [s] per image look-up, for the look-ups' share of the time."""
     kept, peak, peak_stage = 0, 0, "validate"
     for stage in stages.values():
         stage.peak = kept + stage.keeps + stage.working
@@ -919,7 +1001,9 @@ def _finish(stages, plan, facts, settings, rates, workers, available) -> Estimat
     return Estimate(stages=stages, seconds=sum(v.seconds for v in stages.values()),
                     peak_bytes=int(peak), peak_stage=peak_stage, plan=plan.to_report(),
                     facts=facts, settings=asdict(settings), rates_source=rates.source,
-                    workers=workers, available_bytes=available, warnings=list(rates.warnings))
+                    workers=workers, available_bytes=available, warnings=list(rates.warnings),
+                    texture_seconds=texture_rate * sum(float(v.counts.get("texture_lookups", 0))
+                                                       for v in stages.values()))
 
 
 def estimate_cost(scene, settings=None, rates: Rates | None = None, passes=(),

@@ -39,12 +39,20 @@ Per-hit inputs (``inputs``, arrays over the N hits, float; all optional until a 
     :class:`MissingInput`.
 
 Images (``Graph.images``: name -> :class:`Image`)
-    ``pixels`` (H, W, 4) float32, row 0 at the bottom and pixel centres at ((i + 0.5) / W,
-    (j + 0.5) / H) in UV, as Blender stores them. ``encoding`` is ``"srgb"`` for 8-bit sRGB
-    images, whose pixels stay sRGB-encoded bytes / 255 (what ``Image.pixels`` gives for such an
-    image, measured on Blender 5.2): as in Cycles, the look-up interpolates the encoded values
-    and converts to scene linear afterwards; ``"linear"`` for float images and Non-Color data,
-    taken as they are.
+    ``pixels`` (H, W, 4), row 0 at the bottom and pixel centres at ((i + 0.5) / W,
+    (j + 0.5) / H) in UV, as Blender stores them, held once in the precision they came in
+    (:func:`stored_pixels`): uint8 for 8-bit images (texels within ``BYTE_TOLERANCE`` = 1e-6
+    of k / 255, 4 B a texel), float16 for float images whose every texel round-trips through
+    float16 within ``F16_RELATIVE`` = 1e-4 relative + ``F16_ABSOLUTE`` = 1e-6 (the float bar
+    of the Cycles bake tests, so holding them so never costs accuracy; in practice images that
+    were half floats, 8 B a texel), float32 for the rest (HDR, 16 B a texel). A look-up widens
+    only the texels it reads, to float32 (bytes as k / 255, Cycles' byte texture read), and
+    interpolates in float32 as Cycles' CPU kernel does. ``encoding`` is ``"srgb"`` for 8-bit
+    sRGB images, whose pixels stay sRGB-encoded bytes (what ``Image.pixels`` gives for such an
+    image, bytes / 255, measured on Blender 5.2): as in Cycles, the look-up interpolates the
+    encoded values and converts to scene linear afterwards; ``"linear"`` for float images and
+    Non-Color data, taken as they are. ``Image.nbytes`` is what the texels take; the export
+    shares one ``Image`` between the materials that read it.
 
 Nodes (Blender 5.2 LTS; formulas follow Cycles' SVM kernel, ``intern/cycles/kernel/svm``)
     Value, RGB, Reroute, Math (every operation, Clamp), Vector Math (every operation), Map Range
@@ -92,7 +100,8 @@ from . import procedural
 __all__ = ["Node", "Graph", "Image", "UnsupportedNode", "MissingInput", "evaluate",
            "graph_to_dict", "graph_from_dict", "SUPPORTED", "math_op", "vector_math_op",
            "mix_color", "rgb_to_hsv", "hsv_to_rgb", "rgb_to_hsl", "hsl_to_rgb",
-           "srgb_to_linear", "ramp_table", "image_lookup"]
+           "srgb_to_linear", "ramp_table", "image_lookup", "stored_pixels", "Evaluator",
+           "image_bytes"]
 
 LUMA = np.array([0.21263901, 0.71516867, 0.07219232])  # Blender 5.2 config luminance (measured)
 FLT_EPSILON = 1.1920929e-07
@@ -112,11 +121,62 @@ class MissingInput(KeyError):
     """A per-hit input a node needs (``"uv"``, ``"position"`` ...) was not given."""
 
 
+# Texels held as float16 where every one of them round-trips through float16 within the
+# evaluator's float bar (``F16_RELATIVE`` relative plus ``F16_ABSOLUTE``, tests/test_nodes.py's
+# bar for float results): in practice the images that were half floats already (half EXRs).
+F16_RELATIVE = 1e-4
+F16_ABSOLUTE = 1e-6
+# Float texels held as bytes where each is within this of k / 255 (what Blender hands back for
+# an 8-bit image: bytes / 255, measured within 3e-8).
+BYTE_TOLERANCE = 1e-6
+_INV255 = np.float32(1.0 / 255.0)
+
+
+def stored_pixels(pixels) -> np.ndarray:
+    """(H, W, 4) texels in the most compact of uint8, float16 and float32 that holds them
+    within the evaluator's bars (module docstring, "Images"); uint8 and float16 arrays are
+    kept as they are."""
+    px = np.asarray(pixels)
+    if px.dtype in (np.uint8, np.float16):
+        return np.ascontiguousarray(px)
+    px = np.ascontiguousarray(px, np.float32)
+    if px.size == 0:
+        return px
+    with np.errstate(invalid="ignore", over="ignore"):
+        k = np.round(px * np.float32(255.0))
+        if np.all((k >= 0) & (k <= 255)
+                  & (np.abs(k * _INV255 - px) <= np.float32(BYTE_TOLERANCE))):
+            return k.astype(np.uint8)
+        half = px.astype(np.float16)
+        err = np.abs(half.astype(np.float32) - px)
+        if np.all(err <= np.float32(F16_RELATIVE) * np.abs(px) + np.float32(F16_ABSOLUTE)):
+            return half
+    return px
+
+
 @dataclass
 class Image:
-    """Pixels (H, W, 4) float32, bottom row first; ``encoding`` "srgb" or "linear"."""
+    """Texels (H, W, 4), bottom row first, held once in the precision they came in
+    (:func:`stored_pixels`: uint8 for 8-bit images, float16 where lossless, else float32);
+    ``encoding`` "srgb" or "linear". ``nbytes``: the memory they take."""
     pixels: np.ndarray
     encoding: str = "linear"
+
+    def __post_init__(self):
+        self.pixels = stored_pixels(self.pixels)
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.pixels.nbytes)
+
+    def texels(self, index) -> np.ndarray:
+        """(N, 4) float32 values of the texels at flat indices ``index`` (row * W + column):
+        bytes as k / 255, halves widened."""
+        px = self.pixels
+        t = np.take(px.reshape(-1, px.shape[-1]), index, axis=0)
+        if t.dtype == np.uint8:
+            return t.astype(np.float32) * _INV255
+        return t.astype(np.float32, copy=False)
 
 
 @dataclass
@@ -156,7 +216,7 @@ def graph_from_dict(d: dict, pixels: dict | None = None) -> Graph:
                              dict(n["outputs"])) for n in d["nodes"]}
     links = {(a, b): (c, e) for a, b, c, e in d["links"]}
     pixels = pixels or {}
-    images = {k: Image(np.asarray(pixels[k], np.float32), enc)
+    images = {k: Image(pixels[k], enc)
               for k, enc in d.get("images", {}).items() if k in pixels}
     return Graph(nodes, links, images)
 
@@ -579,32 +639,54 @@ def _wrap_index(i, n, extension):
 
 def image_lookup(image: Image, x, y, interpolation="Linear", extension="REPEAT"):
     """RGBA (N, 4) of ``image`` at UV (x, y), as Cycles' image look-up and svm_image_texture
-    give it (interpolating the stored encoding, then sRGB -> linear for "srgb" images)."""
+    give it (interpolating the stored encoding in float32, bytes as k / 255, then sRGB ->
+    linear for "srgb" images)."""
     px = image.pixels
     h, w = px.shape[:2]
+    flat = px.reshape(h * w, px.shape[-1])
     x, y = np.asarray(x, np.float32), np.asarray(y, np.float32)
     if interpolation == "Closest":
         fx, fy = np.floor(x * np.float32(w)), np.floor(y * np.float32(h))
         ix, okx = _wrap_index(fx.astype(np.int64), w, extension)
         iy, oky = _wrap_index(fy.astype(np.int64), h, extension)
-        out = px[iy, ix].astype(float) * (okx & oky)[:, None]
+        out = np.take(flat, iy * w + ix, axis=0).astype(np.float32)
+        if extension == "CLIP":
+            out *= (okx & oky)[:, None]
     else:
         sx, sy = x * np.float32(w) - np.float32(0.5), y * np.float32(h) - np.float32(0.5)
         fx, fy = np.floor(sx), np.floor(sy)
-        tx, ty = (sx - fx).astype(float), (sy - fy).astype(float)
+        tx, ty = sx - fx, sy - fy
         ix0, iy0 = fx.astype(np.int64), fy.astype(np.int64)
         if interpolation == "Linear":
             offs, wx, wy = (0, 1), (1.0 - tx, tx), (1.0 - ty, ty)
         else:                                               # Cubic, Smart: B-spline
             offs, wx, wy = (-1, 0, 1, 2), _cubic_weights(tx), _cubic_weights(ty)
-        out = np.zeros((x.shape[0], 4))
+        cols = [_wrap_index(ix0 + o, w, extension) for o in offs]
+        out = np.zeros((x.shape[0], 4), np.float32)
         for j, oy in enumerate(offs):
             iy, oky = _wrap_index(iy0 + oy, h, extension)
-            for i, ox in enumerate(offs):
-                ix, okx = _wrap_index(ix0 + ox, w, extension)
-                out += (wx[i] * wy[j] * (okx & oky))[:, None] * px[iy, ix]
+            row = iy * w
+            for i, (ix, okx) in enumerate(cols):
+                weight = wx[i] * wy[j]
+                if extension == "CLIP":
+                    weight = weight * (okx & oky)
+                # float32 x the stored texel (uint8 or float16 widened by numpy): float32
+                out += weight[:, None] * np.take(flat, row + ix, axis=0)
+    if px.dtype == np.uint8:
+        out *= _INV255                                      # bytes as k / 255
     if image.encoding == "srgb":
-        out[:, :3] = srgb_to_linear(out[:, :3])
+        out[:, :3] = _srgb_to_linear32(out[:, :3])
+    return out.astype(np.float64)
+
+
+def _srgb_to_linear32(c):
+    """:func:`srgb_to_linear` in float32 (Cycles' precision; within 4e-7 of it)."""
+    out = np.maximum(c, np.float32(0.04045))
+    out += np.float32(0.055)
+    out *= np.float32(1.0 / 1.055)
+    np.power(out, np.float32(2.4), out=out)
+    low = c < np.float32(0.04045)
+    out[low] = np.maximum(c[low], np.float32(0.0)) * np.float32(1.0 / 12.92)
     return out
 
 
@@ -1331,16 +1413,38 @@ _NODE_FUNCS = {
 }
 
 
+class Evaluator:
+    """The values of a graph's sockets for one batch of N hits, each node computed once
+    however many sockets ask for it (the closure inputs of one material read one graph)."""
+
+    def __init__(self, graph: Graph, inputs, n: int | None = None):
+        if n is None:
+            n = next((len(v) for v in inputs.values()), 1)
+        self.n = n
+        self._ev = _Eval(graph, inputs, n)
+
+    def value(self, socket: tuple) -> np.ndarray:
+        """As :func:`evaluate` (a fresh array the caller may change)."""
+        out = self._ev.output(*socket)
+        if out is None:
+            raise MissingInput(f"output {socket} has no value")
+        return np.array(out, float)
+
+
 def evaluate(graph: Graph, socket: tuple, inputs: dict, n: int | None = None) -> np.ndarray:
     """The value reaching output ``socket`` = (node name, output identifier) for N hits:
     (N,) for a float socket, (N, 3) for a vector or colour. ``inputs`` holds the per-hit
     coordinates (module docstring); ``n`` is taken from them when not given. Raises
     :class:`UnsupportedNode` for a node outside ``SUPPORTED`` on the path, and
     :class:`MissingInput` when a needed coordinate is absent."""
-    if n is None:
-        n = next((len(v) for v in inputs.values()), 1)
-    ev = _Eval(graph, inputs, n)
-    out = ev.output(*socket)
-    if out is None:
-        raise MissingInput(f"output {socket} has no value")
-    return np.array(out, float)
+    return Evaluator(graph, inputs, n).value(socket)
+
+
+def image_bytes(graphs) -> int:
+    """Bytes of the texels of the distinct images the ``graphs`` (None entries skipped) hold,
+    each image counted once however many graphs share it."""
+    seen = {}
+    for graph in graphs:
+        for image in (graph.images.values() if graph is not None else ()):
+            seen[id(image)] = image.nbytes
+    return int(sum(seen.values()))

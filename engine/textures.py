@@ -25,7 +25,15 @@ weights 1 - u - v, u, v, as ``surfaces.SceneSurfaces.normals`` uses them) and ha
 ``reduction(material_id, prim, bu, bv)`` -> (diffuse, specular, exitance) (k, 3) float64
     the seed's rho_d, rho_s and M (``shaders.seed_reduction``) at hits on triangles ``prim``
     of one material, clipped as export clips a material (negative values to 0, rho_d + rho_s
-    scaled down to 1 where it exceeds 1).
+    scaled down to 1 where it exceeds 1); ``reflectance`` (rho_d, rho_s) and ``exitance`` (M)
+    are its two halves, each evaluating only the node-driven inputs it reads
+    (``EMISSION_PARAMS`` feed M and nothing else), so that a light sample or a photon leaving
+    an emitter reads no albedo texture and a hit that needs the albedo no emission texture
+    (``bsdf.SurfaceParams`` asks for each half when one of its slots is first read). A batch
+    evaluates the material's graph once for all its inputs (``nodes.Evaluator``) and
+    interpolates only the corner attributes its nodes read (:class:`HitInputs`).
+``lookups_per_hit(material)`` -> (reflectance, emission) image look-ups per evaluation, for
+    the cost estimate (``engine/estimate.py``).
 
 What follows the texture at each hit, and what takes its mean
     The diffuse reflectance (camera shading, the photons' stored power and roulette, gather
@@ -41,12 +49,15 @@ Numbers are clipped to the ranges export clips the socket values to (``PARAM_RAN
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 
 from . import nodes
 from .shaders import CLOSURE_KINDS, seed_reduction
 
-__all__ = ["MaterialTextures", "approximations", "interpolate_corners", "MEAN_SAMPLES",
+__all__ = ["MaterialTextures", "HitInputs", "approximations", "interpolate_corners",
+           "lookups_per_hit", "EMISSION_PARAMS", "MEAN_SAMPLES",
            "PARAM_RANGES", "EXACT_PARAMS"]
 
 # Area-uniform points per textured material for the means the lobes use.
@@ -60,6 +71,10 @@ PARAM_RANGES = {
     "coat_weight": (0.0, None), "sheen_weight": (0.0, None),
     "thin_film_thickness": (0.0, None), "anisotropy": (-1.0, 1.0),
 }
+# The inputs the seed's exitance M reads (``shaders.seed_reduction``), closure kind -> its
+# parameter; no other input changes M, and these change nothing else of the reduction.
+EMISSION_KEY = {"principled": "emission", "emission": "radiance"}
+EMISSION_PARAMS = set(EMISSION_KEY.items())
 # (closure kind, parameter) pairs whose per-hit value is rendered exactly (see the module
 # docstring); the others' lobes take their mean.
 EXACT_PARAMS = {("principled", "base_color"), ("principled", "metallic"),
@@ -76,6 +91,28 @@ def interpolate_corners(corner: np.ndarray, prim, bu, bv) -> np.ndarray:
     u = np.asarray(bu, np.float64)[:, None]
     v = np.asarray(bv, np.float64)[:, None]
     return c[:, 0] * (1.0 - u - v) + c[:, 1] * u + c[:, 2] * v
+
+
+class HitInputs(Mapping):
+    """The per-hit coordinates ``nodes.evaluate`` reads at hits (prim, bu, bv): each corner
+    attribute interpolated only when a node first asks for it, then kept."""
+
+    def __init__(self, corners: dict, prim, bu, bv):
+        self._corners, self._hits, self._done = corners, (prim, bu, bv), {}
+
+    def __getitem__(self, key):
+        if key not in self._done:
+            self._done[key] = interpolate_corners(self._corners[key], *self._hits)
+        return self._done[key]
+
+    def __contains__(self, key):
+        return key in self._corners
+
+    def __iter__(self):
+        return iter(self._corners)
+
+    def __len__(self):
+        return len(self._corners)
 
 
 def _as_param(value: np.ndarray, kind_default, graph, socket) -> np.ndarray:
@@ -97,23 +134,65 @@ def _clip(param: str, value):
     return np.clip(value, low, high)
 
 
-def param_at(graph, kind: str, param: str, factors, inputs: dict, n: int) -> np.ndarray:
+def param_at(evaluator: "nodes.Evaluator", graph, kind: str, param: str, factors) -> np.ndarray:
     """The per-hit value (N,) or (N, 3) of one node-driven parameter: the product of its
-    factors, each a node output or a constant."""
+    factors, each a node output (of ``evaluator``, one batch of hits on ``graph``) or a
+    constant."""
     default = CLOSURE_KINDS[kind][param]
+    n = evaluator.n
     value = None
     for socket, constant in factors:
         if socket is None:
             part = np.asarray(constant, np.float64)
         else:
-            part = _as_param(nodes.evaluate(graph, tuple(socket), inputs, n), default, graph,
-                             socket)
+            part = _as_param(evaluator.value(tuple(socket)), default, graph, socket)
         value = part if value is None else value * part
     if isinstance(default, tuple):
         value = np.broadcast_to(value, (n, 3))
     else:
         value = np.broadcast_to(value, (n,))
     return _clip(param, np.array(value, np.float64))
+
+
+def _upstream(graph, node: str) -> set:
+    """Names of ``node`` and every node linked into it, directly or not."""
+    into = {}
+    for (to_node, _), (from_node, _) in graph.links.items():
+        into.setdefault(to_node, []).append(from_node)
+    seen, stack = set(), [node]
+    while stack:
+        name = stack.pop()
+        if name not in seen:
+            seen.add(name)
+            stack.extend(into.get(name, ()))
+    return seen
+
+
+def lookups_per_hit(material) -> tuple[int, int]:
+    """(reflectance, emission): the image look-ups one per-hit evaluation of the material's
+    node-driven (rho_d, rho_s) and M makes (``MaterialTextures.reflectance`` /
+    ``exitance``): the Image Texture nodes with an image upstream of the inputs each part
+    reads; a part driven by other nodes only (procedural textures, coordinates) counts 1,
+    an undriven part 0. What the cost estimate counts (``engine/estimate.py``)."""
+    graph = getattr(material, "graph", None)
+    if graph is None:
+        return 0, 0
+    parts = {"reflectance": set(), "emission": set()}
+    driven = {"reflectance": False, "emission": False}
+    for c in material.closures:
+        for param, factors in c.textures.items():
+            part = "emission" if (c.kind, param) in EMISSION_PARAMS else "reflectance"
+            for socket, _constant in factors:
+                if socket is not None:
+                    driven[part] = True
+                    parts[part] |= _upstream(graph, socket[0])
+    out = []
+    for part in ("reflectance", "emission"):
+        images = sum(1 for name in parts[part] if name in graph.nodes
+                     and graph.nodes[name].type == "ShaderNodeTexImage"
+                     and graph.nodes[name].props.get("image") in graph.images)
+        out.append(max(images, 1) if driven[part] else 0)
+    return out[0], out[1]
 
 
 def approximations(closures) -> list[str]:
@@ -154,37 +233,69 @@ class MaterialTextures:
         for material_id in np.flatnonzero(self.textured):
             self._means(int(material_id))
 
-    def inputs(self, prim, bu, bv) -> dict:
-        """The per-hit coordinates ``nodes.evaluate`` reads, at hits (prim, bu, bv)."""
-        return {key: interpolate_corners(corner, prim, bu, bv)
-                for key, corner in self.corners.items()}
+    def inputs(self, prim, bu, bv) -> HitInputs:
+        """The per-hit coordinates ``nodes.evaluate`` reads, at hits (prim, bu, bv)
+        (interpolated when first read)."""
+        return HitInputs(self.corners, prim, bu, bv)
 
-    def closures_at(self, material_id: int, prim, bu, bv) -> list:
-        """The material's closures with per-hit parameters at hits (prim, bu, bv)."""
-        n = len(prim)
+    def closures_at(self, material_id: int, prim, bu, bv, part: str = "all") -> list:
+        """The material's closures with per-hit parameters at hits (prim, bu, bv); the
+        material's graph is evaluated once for all of them (each node once). ``part``:
+        "all", or "reflectance" / "emission" for only the node-driven inputs that the seed's
+        (rho_d, rho_s) / M read (``EMISSION_PARAMS``; the others keep their means)."""
         graph = self.graphs[material_id]
-        inputs = self.inputs(prim, bu, bv)
+        evaluator = nodes.Evaluator(graph, self.inputs(prim, bu, bv), len(prim))
         out = []
         for c in self.scene.materials[material_id].closures:
-            if not c.textures:
+            wanted = [param for param in c.textures
+                      if part == "all" or ((c.kind, param) in EMISSION_PARAMS)
+                      == (part == "emission")]
+            if not wanted:
                 out.append(c)
                 continue
             params = dict(c.params)
-            for param, factors in c.textures.items():
-                params[param] = param_at(graph, c.kind, param, factors, inputs, n)
+            for param in wanted:
+                params[param] = param_at(evaluator, graph, c.kind, param, c.textures[param])
             out.append(c.at_hits(params))
         return out
 
     def reduction(self, material_id: int, prim, bu, bv):
         """(diffuse, specular, exitance) (k, 3) at hits on triangles ``prim`` of material
         ``material_id`` with barycentrics (bu, bv), clipped as export clips materials."""
+        diffuse, specular = self.reflectance(material_id, prim, bu, bv)
+        return diffuse, specular, self.exitance(material_id, prim, bu, bv)
+
+    def reflectance(self, material_id: int, prim, bu, bv):
+        """(diffuse, specular) (k, 3) of :meth:`reduction` alone: only the node-driven inputs
+        that they read are evaluated (an emission texture is not)."""
         n = len(prim)
-        seed = seed_reduction(self.closures_at(material_id, prim, bu, bv))
-        diffuse, specular, exitance = (np.maximum(np.broadcast_to(x, (n, 3)), 0.0)
-                                       for x in (seed.diffuse, seed.specular, seed.exitance))
+        seed = seed_reduction(self.closures_at(material_id, prim, bu, bv, "reflectance"))
+        diffuse, specular = (np.maximum(np.broadcast_to(x, (n, 3)), 0.0)
+                             for x in (seed.diffuse, seed.specular))
         total = (diffuse + specular).max(axis=1, keepdims=True)
         scale = 1.0 / np.maximum(total, 1.0)
-        return diffuse * scale, specular * scale, np.array(exitance)
+        return diffuse * scale, specular * scale
+
+    def exitance(self, material_id: int, prim, bu, bv):
+        """The exitance (k, 3) of :meth:`reduction` alone (what emitters and photons leaving
+        them read): only the emission inputs are evaluated, summed as ``seed_reduction``
+        sums them (M = pi x emission x the closure's weight)."""
+        n = len(prim)
+        out = np.zeros((n, 3))
+        for c in self.closures_at(material_id, prim, bu, bv, "emission"):
+            key = EMISSION_KEY.get(c.kind)
+            if key is not None:
+                out += c.weight * (np.pi * np.asarray(c.params[key], np.float64))
+        return np.maximum(out, 0.0)
+
+    def textured_part(self, part: str) -> np.ndarray:
+        """(M,) bool: materials with a node-driven input that ``part`` ("reflectance",
+        "emission") reads."""
+        out = np.zeros(len(self.textured), bool)
+        for m in np.flatnonzero(self.textured):
+            out[m] = any(((c.kind, param) in EMISSION_PARAMS) == (part == "emission")
+                         for c in self.scene.materials[m].closures for param in c.textures)
+        return out
 
     def _means(self, material_id: int) -> None:
         """Fill ``mean_closures`` and ``mean_reduction`` of one textured material from

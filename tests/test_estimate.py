@@ -166,6 +166,96 @@ def test_cache_records_within_a_factor_2():
 
 
 # -- Memory -----------------------------------------------------------------------------------
+def _image_graph(image):
+    from lanterna.engine import nodes
+
+    graph = nodes.Graph()
+    graph.nodes["Image"] = nodes.Node(
+        "ShaderNodeTexImage", "Image", {"image": "tex", "interpolation": "Linear"},
+        {"Vector": ("VECTOR", [0.0, 0.0, 0.0])}, {"Color": "RGBA", "Alpha": "VALUE"})
+    graph.images["tex"] = image
+    return graph
+
+
+def _textured(name, image, param="base_color"):
+    from lanterna.engine.shaders import Closure
+
+    closure = Closure("principled")
+    closure.textures[param] = [(("Image", "Color"), None)]
+    return Material(name, diffuse=0.5, closures=(closure,), graph=_image_graph(image))
+
+
+def _textured_room():
+    """``_room`` whose floor and ceiling read one shared 8-bit image (two graphs, one Image
+    object) and whose back wall reads a float32 one; the other walls are plain."""
+    from lanterna.engine import nodes
+
+    rng = np.random.default_rng(7)
+    byte = nodes.Image(rng.integers(0, 256, (16, 32, 4)).astype(np.uint8), "srgb")
+    hdr = nodes.Image(np.exp(rng.normal(0, 2, (4, 8, 4))).astype(np.float32), "linear")
+    scene = _room()
+    scene.materials = [Material("walls", diffuse=0.5), _textured("floor", byte),
+                       _textured("ceiling", byte), _textured("back", hdr)]
+    ids = np.zeros(12, np.int32)
+    ids[0:2], ids[2:4], ids[8:10] = 1, 2, 3
+    scene.material_ids = ids
+    scene.corner_attributes = {"uv": np.zeros((12, 3, 2), np.float32)}
+    return scene, byte, hdr
+
+
+def test_texture_memory_counts_each_image_once_and_lookups_follow_the_area():
+    """The estimate's texture bytes are the held arrays' nbytes, an image two materials share
+    counted once (16 x 32 x 4 bytes, not twice; the float32 image 16 B a texel); image
+    look-ups per hit are the textured share of the area (floor 16 + ceiling 16 + back wall
+    12 m^2 of 80); the camera's look-ups are its hits times that, at the look-up rate, and
+    the dry-run table names the bytes."""
+    scene, byte, hdr = _textured_room()
+    facts = estimate.scene_facts(scene)
+    assert byte.pixels.dtype == np.uint8 and hdr.pixels.dtype == np.float32
+    assert facts.texture_bytes == byte.pixels.nbytes + hdr.pixels.nbytes == 2048 + 512
+    assert facts.texture_lookups == pytest.approx(44.0 / 80.0, rel=1e-6)
+    assert facts.emission_lookups == 0.0
+    settings = RenderSettings(samples=2, photons=10_000, gather_m=4, gather_n=8)
+    e = estimate.estimate_from_facts(facts, settings)
+    plain = estimate.estimate_from_facts(estimate.scene_facts(_room()), settings)
+    cam = e.stages["camera"].counts
+    assert cam["texture_lookups"] == pytest.approx(
+        (cam["camera_rays"] + cam.get("specular_rays", 0)
+         + cam.get("gathered", 0) * 4 * 8 * (1 + settings.resolved().gather_guided))
+        * 44.0 / 80.0)
+    assert "texture_lookups" not in plain.stages["camera"].counts
+    rates = estimate.load_rates()
+    workers = min(settings.resolved().worker_count, estimate.os.cpu_count() or 1)
+    rate = rates.seconds["texture_lookup"] * min(rates.workers, rates.cores) / workers
+    looks = sum(s.counts.get("texture_lookups", 0) for s in e.stages.values())
+    assert looks > 0 and e.texture_seconds == pytest.approx(looks * rate, rel=1e-6)
+    assert e.to_report()["texture_bytes"] == 2560
+    assert f"textures {estimate.format_seconds(e.texture_seconds):>21}" \
+        f"{estimate.format_bytes(2560):>11}" in " ".join(e.table().split("\n"))
+    assert estimate.SceneFacts.from_dict({k: v for k, v in facts.to_dict().items()
+                                          if not k.startswith(("texture", "emission"))}
+                                         ).texture_bytes == 0      # facts saved before
+
+
+def test_textured_emitters_count_lookups_per_emitted_flux():
+    """Image look-ups per photon or light sample: the textured emitters' share of the
+    lights' luminance flux (an emissive ceiling of exitance pi x 2 W/m^2 a side on 16 m^2,
+    both sides, against a 60 W point light)."""
+    from lanterna.engine import nodes
+
+    scene = _room()
+    image = nodes.Image(np.full((2, 2, 4), 255, np.uint8), "srgb")
+    ceiling = _textured("ceiling", image, "emission")
+    ceiling.exitance = np.full(3, 2.0 * np.pi)
+    scene.materials = [Material("walls", diffuse=0.5), ceiling]
+    scene.material_ids = np.array([0, 0, 1, 1] + [0] * 8, np.int32)
+    scene.corner_attributes = {"uv": np.zeros((12, 3, 2), np.float32)}
+    facts = estimate.scene_facts(scene)
+    mesh = 2.0 * np.pi * 16.0 * 2.0
+    assert facts.emission_lookups == pytest.approx(mesh / (mesh + 60.0), rel=1e-6)
+    assert facts.texture_lookups == 0.0
+
+
 def test_too_little_memory_is_refused_before_any_work(monkeypatch):
     built = []
 

@@ -295,6 +295,54 @@ def test_srgb_and_image_lookup():
     assert np.allclose(N.image_lookup(flat, np.array([0.3]), np.array([0.7]), "Cubic"), 0.5)
 
 
+def _lookups(image, rng):
+    """Every interpolation and extension at 500 random UVs in [-1.5, 2.5)^2."""
+    x, y = rng.random(500) * 4 - 1.5, rng.random(500) * 4 - 1.5
+    return np.stack([N.image_lookup(image, x, y, interp, ext)
+                     for interp in ("Closest", "Linear", "Cubic")
+                     for ext in ("REPEAT", "EXTEND", "CLIP", "MIRROR")])
+
+
+def _as_float32(image):
+    ref = N.Image(image.pixels, image.encoding)
+    ref.pixels = image.pixels.astype(np.float32) * (np.float32(1 / 255) if image.pixels.dtype
+                                                    == np.uint8 else np.float32(1))
+    return ref
+
+
+def test_images_are_held_in_the_precision_they_came_in():
+    """8-bit texels (k / 255, as Blender hands them over) are held as uint8, half-float
+    texels as float16, the rest as float32, and every look-up gives what the float32 texels
+    give: within 1e-6 for bytes and halves (both exact; float32 rounding only), and the
+    float32 image is not narrowed (float16 would move its texels by up to 4.9e-4 relative,
+    over the float bar of 1e-4)."""
+    rng = np.random.default_rng(3)
+    shape = (5, 7, 4)
+    byte = N.Image(rng.integers(0, 256, shape).astype(np.float32) / 255, "srgb")
+    half = N.Image(rng.normal(0, 3, shape).astype(np.float16).astype(np.float32), "linear")
+    hdr = N.Image(np.exp(rng.normal(0, 3, shape)).astype(np.float32), "linear")
+    assert (byte.pixels.dtype, half.pixels.dtype, hdr.pixels.dtype) == (np.uint8, np.float16,
+                                                                        np.float32)
+    assert (byte.nbytes, half.nbytes, hdr.nbytes) == (4 * 35, 8 * 35, 16 * 35)
+    for image in (byte, half, hdr):
+        ours, ref = _lookups(image, np.random.default_rng(4)), _lookups(_as_float32(image),
+                                                                        np.random.default_rng(4))
+        assert np.all(np.abs(ours - ref) <= 1e-6 * np.abs(ref) + 1e-7), image.pixels.dtype
+    narrowed = hdr.pixels.astype(np.float16).astype(np.float32)
+    assert np.max(np.abs(narrowed / hdr.pixels - 1)) > 1e-4      # why float32 stays
+    # A texel 2e-6 off k / 255 is no byte; one within 1e-6 is.
+    assert N.Image(np.full(shape, 0.5 + 2e-6, np.float32)).pixels.dtype != np.uint8
+    assert N.Image(np.full(shape, 128 / 255 + 5e-7, np.float32)).pixels.dtype == np.uint8
+
+
+def test_shared_images_count_once():
+    rng = np.random.default_rng(5)
+    a = N.Image(rng.integers(0, 256, (4, 4, 4)).astype(np.uint8), "srgb")
+    b = N.Image(rng.random((2, 3, 4)).astype(np.float32), "linear")
+    g1, g2 = N.Graph(images={"a": a}), N.Graph(images={"a": a, "b": b})
+    assert N.image_bytes([g1, g2, None]) == 64 + 96 == a.nbytes + b.nbytes
+
+
 def test_checker_gradient_ramp_maprange_edges():
     p = np.array([[1.0, 0.0, 0.0], [0.999, 0.0, 0.0], [-0.5, 0.0, 0.0]])
     assert N._checker(p).tolist() == [0.0, 0.0, 1.0]    # x = 1 is nudged into cell 0, as Cycles

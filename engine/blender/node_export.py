@@ -16,9 +16,11 @@ the bytes / 255 as stored, *not* converted to linear whatever its colour space (
 an 8-bit image tagged "sRGB" is exported with encoding "srgb" (the evaluator interpolates the
 encoded values and converts afterwards, as Cycles does with its byte textures); "Non-Color"
 and the linear spaces as "linear"; any other colour space on a byte image is reported through
-``warn`` and read as sRGB. Packed and file images read the same way (``pixels`` loads them);
-tiled (UDIM) images and sequences are reported and left out (the Image Texture node then gives
-Cycles' missing-image magenta).
+``warn`` and read as sRGB. An 8-bit image is then held as its bytes (uint8, 4 B a texel), a
+float image as float16 where that is lossless and float32 otherwise (``nodes.stored_pixels``);
+the float32 read is let go once the image is made. Packed and file images read the same way
+(``pixels`` loads them); tiled (UDIM) images and sequences are reported and left out (the
+Image Texture node then gives Cycles' missing-image magenta).
 
 Parameters: ``warn`` (callable taking one message; default: ignore), ``images`` (a dict cache
 name -> ``nodes.Image``, shared between materials so each image is read once).
@@ -99,6 +101,8 @@ def image_pixels(image, warn=lambda m: None):
     else:
         warn(f"image '{image.name}': colour space '{space}' read as sRGB")
         encoding = "srgb"
+    if not image.is_float:            # the bytes Blender holds: bytes / 255 -> bytes
+        px = np.round(px * np.float32(255.0)).clip(0, 255).astype(np.uint8)
     return N.Image(px, encoding)
 
 
