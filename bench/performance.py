@@ -12,7 +12,8 @@ about 20 minutes on 2 cores)
        raw pykdtree answering the same k-nearest queries; the irradiance cache's grid against
        its kd-tree (``bench/cache_index.py``).
     3. Not rerun here: the section "Materials against Cycles (issue 23)" written by
-       ``lanterna bench --materials`` (``bench/materials.py``) is kept as it is.
+       ``lanterna bench --materials`` (``bench/materials.py``) and the HDRI worlds' of
+       ``lanterna bench --materials --worlds`` are kept as they are.
 These are benchmarks on a shared machine, never tests: they print and record, and assert
 nothing.
 """
@@ -110,11 +111,13 @@ def write(path: Path, sweeps: dict, throughput: dict, minutes: float) -> None:
               f"{ph['trace_seconds']:.2f} s, kd-tree {ph['build_seconds']:.2f} s; a "
               f"`photon-map` render at 640 × 480 takes "
               f"{ph['photon_map_render']['total_seconds']:.1f} s."]
-    from .materials import section_of
+    from .materials import SUITES, section_of
 
-    kept = section_of(path.read_text(encoding="utf-8")) if path.is_file() else None
-    if kept:                    # bench/materials.py's section: rewritten only by that module
-        lines += ["", kept.rstrip("\n")]
+    text = path.read_text(encoding="utf-8") if path.is_file() else ""
+    for suite in SUITES.values():   # bench/materials.py's sections: rewritten only by it
+        kept = section_of(text, suite.section)
+        if kept:
+            lines += ["", kept.rstrip("\n")]
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
 
 
