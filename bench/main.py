@@ -51,7 +51,7 @@ def main(argv=None) -> int:
             return 2
         from .sweep import main as sweep_main
         return sweep_main([a for a in argv if a != "--sweep"])
-    if "--materials" in argv:  # issue 23: final against Cycles on the material scenes
+    if "--materials" in argv:  # issues 23, 24: final against Cycles (materials, --worlds)
         from .materials import main as materials_main
         return materials_main([a for a in argv if a != "--materials"])
     if "--textures" in argv:  # issue 24: what textures add to final (textures.py)
@@ -81,7 +81,8 @@ def main(argv=None) -> int:
                              "see bench/sweep.py (--sweep --help)")
     parser.add_argument("--materials", action="store_true",
                         help="final's time against Cycles' for the same error on the material "
-                             "scenes; see bench/materials.py (--materials --help)")
+                             "scenes (with --worlds: the HDRI world scenes); see "
+                             "bench/materials.py (--materials --help)")
     parser.add_argument("--textures", action="store_true",
                         help="what texture evaluation adds to the textured room's final, "
                              "against the same scene with each texture's mean; see "

@@ -1,9 +1,13 @@
-"""Speed on the material scenes: Lanterna's ``final`` against Cycles at the same error (issue 23).
+"""Speed on the material and HDRI-world scenes: Lanterna's ``final`` against Cycles at the same
+error (issues 23 and 24).
 
-What it computes (``lanterna bench --materials``)
+What it computes (``lanterna bench --materials [--worlds]``)
     For each scene of ``--scenes`` (default all five of ``tests/material_scenes.py``'s
     ``MATERIAL_SCENES``: factory_cube at 192 x 108, principled_room, metal_sphere, mix_floor
-    and glass_caustic at 80 x 60), in one process:
+    and glass_caustic at 80 x 60; with ``--worlds`` the suite ``SUITES["worlds"]``: yard and
+    window_room of ``tests/world_scenes.py`` at 80 x 60, references in
+    ``tests/data/cycles_world`` from ``make_world_refs.py``, goal scene the yard), in one
+    process:
 
     1. The reference: the stored ``tests/data/cycles_materials/<scene>.npz``
        (``tests/data/make_material_refs.py``: Cycles CPU, all bounces, 4-8 seeds of 512-12288
@@ -45,7 +49,11 @@ Columns (``materials.csv``: one row per render; ``materials_summary.csv``: one p
     stage_<name>          Lanterna: ``report["stages"][name]["seconds"]`` [s].
     cycles_seconds_for_error, cycles_status, ratio   step 4 for the noisy curve;
     oidn_seconds_for_error, oidn_status, oidn_ratio  the same for Cycles + OIDN.
-    goal_met              principled_room only: ratio <= ``GOAL_RATIO`` (0.5).
+    goal_met              principled_room only (the yard with ``--worlds``): ratio <=
+                          ``GOAL_RATIO`` (0.5).
+    check_256 (JSON)      issue 24's check: final's error at or below Cycles-256's and its
+                          time <= 0.5 x that render's (``check_at_samples``); the worlds'
+                          section says it per scene.
 
 Outputs
     ``--out`` (default ``out/materials``): ``materials.csv``, ``materials_summary.csv``,
@@ -55,7 +63,10 @@ Outputs
     against seconds: Cycles' noisy curve (16-1024 spp), Cycles + OIDN, Lanterna's ``final``
     as a star, a dotted line at its error.
     ``--doc`` (default ``docs/performance.md``; ``none`` to skip): its section
-    ``SECTION_TITLE`` replaced (or appended), the rest of the file kept.
+    ``SECTION_TITLE`` (with ``--worlds``: "HDRI worlds against Cycles (issue 24)") replaced
+    (or appended), the rest of the file kept. With ``--worlds`` the defaults of ``--out`` and
+    ``--plot`` are ``out/worlds`` and ``docs/materials/worlds_vs_cycles.png`` (the files keep
+    their ``materials*`` names); give ``--worlds`` with ``--from-json`` of such a run.
     ``--from-json out/materials/materials.json``: the table, plot and section again from a
     run's JSON, nothing rendered.
 
@@ -78,6 +89,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from .sweep import figures, machine_info, time_for_error
@@ -94,6 +107,49 @@ DEFAULT_PLOT = REPO / "docs" / "materials" / "materials_vs_cycles.png"
 DEFAULT_DOC = REPO / "docs" / "performance.md"
 SECTION_TITLE = "## Materials against Cycles (issue 23)"
 COMMAND = "lanterna bench --materials"
+CHECK_SAMPLES = 256                 # issue 24: final at Cycles-256's error in <= half its time
+
+
+@dataclass(frozen=True)
+class Suite:
+    """A set of scenes the benchmark runs: where their builders and references live, the
+    goal scene, and the section of docs/performance.md it writes."""
+
+    name: str
+    scenes: tuple
+    module: str                     # tests/<module>.py: build(name) makes the bpy scene
+    references: Path
+    goal_scene: str
+    section: str
+    command: str
+    out: str
+    plot: Path
+    issue: str
+    description: str                # the scenes and their references, for the section
+
+
+SUITES = {
+    "materials": Suite(
+        "materials", SCENES, "material_scenes", REFERENCES, GOAL_SCENE, SECTION_TITLE, COMMAND,
+        DEFAULT_OUT, DEFAULT_PLOT, "issue 23",
+        "the same bpy scenes of `tests/material_scenes.py`, with the settings of their stored "
+        "references (`tests/data/cycles_materials`, `make_material_refs.py`: 64 bounces, "
+        "caustics on, no clamping, Blackman-Harris 1.5 px)"),
+    "worlds": Suite(
+        "worlds", ("yard", "window_room"), "world_scenes", REPO / "tests" / "data" / "cycles_world",
+        "yard", "## HDRI worlds against Cycles (issue 24)", COMMAND + " --worlds",
+        os.path.join("out", "worlds"), REPO / "docs" / "materials" / "worlds_vs_cycles.png",
+        "issue 24",
+        "the same bpy scenes of `tests/world_scenes.py` (the yard under an HDRI with a small "
+        "bright sun; window_room, lit only through a window with a light portal), with the "
+        "settings of their stored references (`tests/data/cycles_world`, `make_world_refs.py`: "
+        "64 bounces, no clamping, Blackman-Harris 1.5 px)"),
+}
+
+
+def suite_of(data: dict) -> Suite:
+    """The ``Suite`` a run's ``data`` belongs to (``data["suite"]``; materials by default)."""
+    return SUITES[data.get("suite", "materials")]
 
 
 # -- Pure figures (tested on hand-made data) --------------------------------------------------
@@ -182,13 +238,41 @@ def stage_text(stages: dict, seconds: float, least: float = 0.05) -> str:
     return ", ".join(f"{k} {v:.1f} s ({100 * v / seconds:.0f} %)" for v, k in parts)
 
 
-def scene_sentence(s: dict) -> str:
-    """One sentence on a scene: the ratio, the goal (``GOAL_SCENE``) met or not, and why:
-    where Lanterna's time goes and how much of its error is low-frequency bias."""
+def check_at_samples(s: dict, samples: int = CHECK_SAMPLES) -> dict | None:
+    """Issue 24's check on a scene: does final reach the error of Cycles at ``samples`` spp in
+    at most half that render's time? {"samples", "cycles_error", "cycles_seconds",
+    "error_ok" (ours <= its error), "time_ratio" (ours / its time), "met"}; None when the
+    curve has no render at ``samples``."""
+    row = next((r for r in s["cycles_rows"] if r["samples"] == samples), None)
+    if row is None or not row["seconds"] > 0:
+        return None
+    lan = s["lanterna"]
+    ratio = lan["seconds"] / row["seconds"]
+    ok = lan["error"] <= row["error"]
+    return {"samples": samples, "cycles_error": row["error"], "cycles_seconds": row["seconds"],
+            "error_ok": ok, "time_ratio": ratio, "met": bool(ok and ratio <= GOAL_RATIO)}
+
+
+def check_text(check: dict | None) -> str:
+    """``check_at_samples`` in words."""
+    if check is None:
+        return f"no Cycles render at {CHECK_SAMPLES} spp to check against"
+    n = check["samples"]
+    return (("meets" if check["met"] else "misses") + f" issue 24's check (final at Cycles-{n}'s "
+            f"error, {100 * check['cycles_error']:.2f} %, in <= {GOAL_RATIO} x its "
+            f"{check['cycles_seconds']:.1f} s): final's error is "
+            + ("at or below it" if check["error_ok"] else "above it")
+            + f", its time {check['time_ratio']:.2f} x Cycles-{n}'s")
+
+
+def scene_sentence(s: dict, suite: Suite | None = None) -> str:
+    """One sentence on a scene: the ratio, the suite's goal scene's goal met or not, and
+    why: where Lanterna's time goes and how much of its error is low-frequency bias."""
+    suite = suite or SUITES["materials"]
     lan, c = s["lanterna"], s["cycles"]
     ratio = ratio_text(c)
     where = stage_text(lan["stages"], lan["seconds"])
-    if s["scene"] == GOAL_SCENE:
+    if s["scene"] == suite.goal_scene:
         met = goal_met(c)
         head = ("meets the goal" if met else "misses the goal" if met is False
                 else "cannot tell whether it meets the goal")
@@ -209,36 +293,41 @@ def scene_sentence(s: dict) -> str:
                 f"({100 * first['error']:.2f} % in {first['seconds']:.1f} s)")
     elif c["status"] == "interpolated":
         why += f"; Cycles reaches that error in {c['seconds']:.1f} s"
-        if s["scene"] == GOAL_SCENE and not goal_met(c):
+        if s["scene"] == suite.goal_scene and not goal_met(c):
             why += (f", so the goal needs final at this error in <= "
                     f"{GOAL_RATIO * c['seconds']:.1f} s")
     elif c["status"] == "beyond":
         last = s["cycles_rows"][-1]
         why += (f"; Cycles is still at {100 * last['error']:.2f} % after "
                 f"{s['samples'][-1]} spp ({last['seconds']:.1f} s)")
+    if suite.name == "worlds":
+        why += "; it " + check_text(check_at_samples(s))
     return f"**{s['scene']}**: {head}. {why}."
 
 
 def section_markdown(data: dict, plot_rel: str) -> str:
-    """The section ``SECTION_TITLE`` of docs/performance.md from a run's ``data`` (as
-    ``materials.json`` holds it), the plot linked at ``plot_rel`` (relative to the doc)."""
+    """The suite's section of docs/performance.md (``SECTION_TITLE`` for the materials) from
+    a run's ``data`` (as ``materials.json`` holds it), the plot linked at ``plot_rel``
+    (relative to the doc)."""
+    suite = suite_of(data)
     m = data["machine"]
     loads = ((m.get("load_average_start") or [])[:1]
              + (m.get("load_average_end") or [])[:1])
     load = (f", 1-min load average {min(loads):.1f}-{max(loads):.1f} at the start and end"
             if loads else "")
-    lines = [SECTION_TITLE, "",
+    goal = (f"goal: <= {GOAL_RATIO} on the Principled room" if suite.name == "materials" else
+            f"goal: <= {GOAL_RATIO} on the yard; issue 24 also asks that final reach "
+            f"Cycles-{CHECK_SAMPLES}'s error in at most {GOAL_RATIO} x its time")
+    lines = [suite.section, "",
              f"Measured {m['date']} on {m['cpu_count']} CPUs ({m['cpu']}, {m['platform']}{load}), "
              f"Blender {m.get('blender', '?')}, {data['minutes']:.0f} min. Regenerate with "
-             f"`{COMMAND}` from a checkout (`bench/materials.py`, whose docstring defines every "
+             f"`{suite.command}` from a checkout (`bench/materials.py`, whose docstring defines every "
              "column; it rewrites this section only). Lanterna's `final` (seed 1, after an "
              "untimed warm-up) and Cycles without denoiser at "
-             f"{', '.join(map(str, data['cycles_samples']))} spp on the same bpy scenes of "
-             "`tests/material_scenes.py`, with the settings of their stored references "
-             "(`tests/data/cycles_materials`, `make_material_refs.py`: 64 bounces, caustics on, "
-             "no clamping, Blackman-Harris 1.5 px). Error = relative RMSE less the reference's "
+             f"{', '.join(map(str, data['cycles_samples']))} spp on {suite.description}. "
+             "Error = relative RMSE less the reference's "
              "own noise (as in the sweep); Cycles' time for our error interpolated log-log on "
-             "its curve; ratio = our time / Cycles' (goal: <= 0.5 on the Principled room).", "",
+             f"its curve; ratio = our time / Cycles' ({goal}).", "",
              "| scene | px | final time | final error | its bias (4 × 4 blocks) | Cycles for that "
              "error | ratio ours / Cycles | Cycles + OIDN for it | ratio | Cycles "
              f"{' / '.join(map(str, data['cycles_samples']))} spp: error (time) |",
@@ -254,7 +343,7 @@ def section_markdown(data: dict, plot_rel: str) -> str:
                      f"{curve} |")
     lines += ["", f"![error against time, per scene]({plot_rel})", ""]
     for s in data["scenes"].values():
-        lines += [f"- {scene_sentence(s)}"]
+        lines += [f"- {scene_sentence(s, suite)}"]
     return "\n".join(lines) + "\n"
 
 
@@ -287,20 +376,21 @@ def section_of(text: str, title: str = SECTION_TITLE) -> str | None:
 
 
 # -- Renders ----------------------------------------------------------------------------------
-def material_scenes_module():
-    """``tests/material_scenes.py`` (and the ``parity_scenes`` it imports), from the
-    checkout's tests/ folder."""
+def material_scenes_module(module: str = "material_scenes"):
+    """``tests/<module>.py`` (``material_scenes``, ``world_scenes``, and the
+    ``parity_scenes`` they import), from the checkout's tests/ folder."""
     tests = str(REPO / "tests")
     if tests not in sys.path:
         sys.path.insert(0, tests)
     try:
-        return importlib.import_module("material_scenes")
+        return importlib.import_module(module)
     except Exception as exc:  # noqa: BLE001 - reported as one line
-        raise BenchError(f"cannot import tests/material_scenes.py: "
+        raise BenchError(f"cannot import tests/{module}.py: "
                          f"{' '.join(str(exc).split())} (run from a checkout)") from None
 
 
-def bench_scene(name: str, samples, cycles, tmpdir, warm: dict) -> dict:
+def bench_scene(name: str, samples, cycles, tmpdir, warm: dict,
+                suite: Suite = SUITES["materials"]) -> dict:
     """One scene: reference, Lanterna ``final`` (after a warm-up), the Cycles curve, and the
     speed ratios (module docstring, steps 1-4)."""
     import bpy
@@ -310,9 +400,9 @@ def bench_scene(name: str, samples, cycles, tmpdir, warm: dict) -> dict:
     from ..engine.pipeline import RenderSettings, render
     from ..engine.scene import SceneError
 
-    ref = reference_from_npz(REFERENCES / f"{name}.npz")
+    ref = reference_from_npz(suite.references / f"{name}.npz")
     h, w = ref["image"].shape[:2]
-    ms = material_scenes_module()
+    ms = material_scenes_module(suite.module)
     try:
         bscene = ms.build(name)
         lscene = export_scene(bpy.context.evaluated_depsgraph_get())
@@ -370,8 +460,9 @@ def bench_scene(name: str, samples, cycles, tmpdir, warm: dict) -> dict:
     for key, rs in (("cycles", rows[False]), ("cycles_oidn", rows[True])):
         out[key] = speed_ratio(seconds, lan["error"], [(r["seconds"], r["error"]) for r in rs],
                                [r["samples"] for r in rs] or list(samples))
-    if name == GOAL_SCENE:
+    if name == suite.goal_scene:
         out["goal_met"] = goal_met(out["cycles"])
+    out["check_256"] = check_at_samples(out)
     return out
 
 
@@ -479,24 +570,30 @@ def print_table(data: dict) -> None:
                                         f"{100 * r['error']:.2f}%" for r in s["cycles_rows"]))
         print(f"    stages: {stage_text(lan['stages'], lan['seconds'])}")
     for s in data["scenes"].values():
-        print(f"  {scene_sentence(s)}")
+        print(f"  {scene_sentence(s, suite_of(data))}")
 
 
 # -- Command line -----------------------------------------------------------------------------
 def parse_args(argv):
     parser = Parser(prog=PROG, description=__doc__.split("\n\n")[0])
-    parser.add_argument("--scenes", default=",".join(SCENES))
+    parser.add_argument("--worlds", action="store_true")
+    parser.add_argument("--scenes", default=None)
     parser.add_argument("--cycles-samples", default=",".join(map(str, CYCLES_SAMPLES)))
-    parser.add_argument("--out", default=DEFAULT_OUT)
-    parser.add_argument("--plot", default=str(DEFAULT_PLOT))
+    parser.add_argument("--out", default=None)
+    parser.add_argument("--plot", default=None)
     parser.add_argument("--doc", default=str(DEFAULT_DOC))
     parser.add_argument("--from-json", default=None, metavar="FILE")
     args = parser.parse_args(argv)
+    args.suite = SUITES["worlds" if args.worlds else "materials"]
+    suite = args.suite
+    args.scenes = args.scenes or ",".join(suite.scenes)
+    args.out = args.out or suite.out
+    args.plot = args.plot or str(suite.plot)
     names = [n.strip() for n in args.scenes.split(",") if n.strip()]
-    bad = [n for n in names if n not in SCENES]
+    bad = [n for n in names if n not in suite.scenes]
     if bad or not names:
-        raise BenchError(f"--scenes: unknown scene {bad[0]!r} (of {', '.join(SCENES)})" if bad
-                         else "--scenes is empty")
+        raise BenchError(f"--scenes: unknown scene {bad[0]!r} (of {', '.join(suite.scenes)})"
+                         if bad else "--scenes is empty")
     args.scenes = list(dict.fromkeys(names))
     args.cycles_samples = sorted(set(int_list(args.cycles_samples, "--cycles-samples")))
     if not args.cycles_samples:
@@ -508,14 +605,16 @@ def parse_args(argv):
 
 
 def write_doc(data: dict, doc: Path, plot: Path) -> None:
-    """Replace (or append) the section ``SECTION_TITLE`` of ``doc``, the rest kept."""
+    """Replace (or append) the suite's section of ``doc``, the rest kept."""
     from ..engine import imageio
 
+    title = suite_of(data).section
     text = doc.read_text(encoding="utf-8") if doc.is_file() else ""
-    new = replace_section(text, section_markdown(data, os.path.relpath(plot, doc.parent)))
+    new = replace_section(text, section_markdown(data, os.path.relpath(plot, doc.parent)),
+                          title)
     with imageio.atomic_output(str(doc)) as tmp:
         Path(tmp).write_text(new, encoding="utf-8")
-    print(f"wrote the section {SECTION_TITLE[3:]!r} of {doc}")
+    print(f"wrote the section {title[3:]!r} of {doc}")
 
 
 def from_json(args) -> int:
@@ -544,19 +643,21 @@ def run(args, argv) -> tuple[dict, int]:
     os.makedirs(args.out, exist_ok=True)
     cycles = cycles_functions()
     machine = machine_info()
+    suite = args.suite
     command = " ".join([COMMAND] + [shlex.quote(a) for a in argv])
     print(f"{command}\n{machine['cpu_count']} CPUs ({machine['cpu']}), load average "
           f"{machine.get('load_average_start')}; scenes {', '.join(args.scenes)}; Cycles at "
           f"{', '.join(map(str, args.cycles_samples))} spp", flush=True)
     t0 = time.perf_counter()
-    data = {"command": command, "machine": machine, "cycles_samples": args.cycles_samples,
-            "goal": {"scene": GOAL_SCENE, "ratio": GOAL_RATIO}, "scenes": {}, "errors": []}
+    data = {"command": command, "suite": suite.name, "machine": machine,
+            "cycles_samples": args.cycles_samples,
+            "goal": {"scene": suite.goal_scene, "ratio": GOAL_RATIO}, "scenes": {}, "errors": []}
     status = 0
     with tempfile.TemporaryDirectory(prefix="lanterna_materials_") as tmpdir:
         warm: dict = {}
         for name in args.scenes:
             try:
-                s = bench_scene(name, args.cycles_samples, cycles, tmpdir, warm)
+                s = bench_scene(name, args.cycles_samples, cycles, tmpdir, warm, suite)
             except BenchError as exc:
                 print(f"lanterna bench: error: {' '.join(str(exc).split())}", file=sys.stderr)
                 data["errors"].append(str(exc))

@@ -11,9 +11,10 @@ about 20 minutes on 2 cores)
        tracing the same rays; photon tracing against raw embreex; photon-map estimates against
        raw pykdtree answering the same k-nearest queries; the irradiance cache's grid against
        its kd-tree (``bench/cache_index.py``).
-    3. Not rerun here: the sections "Materials against Cycles (issue 23)" written by
-       ``lanterna bench --materials`` (``bench/materials.py``) and "Texture cost (issue 24)"
-       written by ``lanterna bench --textures`` (``bench/texture_cost.py``) are kept as they are.
+    3. Not rerun here: the sections "Materials against Cycles (issue 23)" and the HDRI
+       worlds' written by ``lanterna bench --materials [--worlds]`` (``bench/materials.py``)
+       and "Texture cost (issue 24)" written by ``lanterna bench --textures``
+       (``bench/texture_cost.py``) are kept as they are.
 These are benchmarks on a shared machine, never tests: they print and record, and assert
 nothing.
 """
@@ -111,13 +112,13 @@ def write(path: Path, sweeps: dict, throughput: dict, minutes: float) -> None:
               f"{ph['trace_seconds']:.2f} s, kd-tree {ph['build_seconds']:.2f} s; a "
               f"`photon-map` render at 640 × 480 takes "
               f"{ph['photon_map_render']['total_seconds']:.1f} s."]
-    from .materials import section_of
+    from .materials import SUITES, section_of
     from .texture_cost import SECTION_TITLE as TEXTURES_TITLE
 
     text = path.read_text(encoding="utf-8") if path.is_file() else ""
-    for title in (None, TEXTURES_TITLE):
-        # bench/materials.py's and bench/texture_cost.py's sections: rewritten only by them
-        kept = section_of(text) if title is None else section_of(text, title)
+    # bench/materials.py's and bench/texture_cost.py's sections: rewritten only by them
+    for title in [suite.section for suite in SUITES.values()] + [TEXTURES_TITLE]:
+        kept = section_of(text, title)
         if kept:
             lines += ["", kept.rstrip("\n")]
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")

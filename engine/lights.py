@@ -11,8 +11,9 @@ What it computes
       spot lights with a radius (``SphereLight``: Cycles 4.x/5.x sphere lights, or its facing
       disk under Soft Falloff; radiance Phi / (4 pi^2 R^2)), a constant world (``WorldLight``), and an image world or a world with portals
       (``EnvironmentLight``: a radiance per sample, ``sample_rgb``; a mixture of the image's
-      CDF, cosine directions and points on portals weighted by the mixture's density, whose
-      ``solid_angle_pdf(points, normals, wi)`` serves MIS).
+      CDF, cosine directions and points on portals weighted by the mixture's density, the
+      portals' share smaller where CDF directions leave through them (``PORTAL_SHIFT``),
+      whose ``solid_angle_pdf(points, normals, wi)`` serves MIS).
     Each sampled light gives, for points x with normals n and uniform numbers u, a direction,
     a distance for the shadow ray and a scalar weight: the irradiance estimate before visibility
     is ``weight * light.rgb`` (L cos(theta_x) / pdf(omega) for emitters); plus a cheap unoccluded estimate of its contribution used to share the samples
@@ -804,6 +805,10 @@ class WorldLight:
 
 ENV_CDF_SHARE = 0.75       # an image world's light samples drawn from its CDF (rest: cosine)
 PORTAL_SHARE = 0.5         # where portals face a point: samples through them
+# Where the image's CDF sees out through the portals (its share ``phi`` of probe directions),
+# the portals' share falls to PORTAL_SHARE - PORTAL_SHIFT * phi and the CDF's gains it.
+PORTAL_SHIFT = 0.4
+PORTAL_PROBES = 8          # the CDF probe directions: a PORTAL_PROBES^2 stratified set
 
 
 class PortalSet:
@@ -841,6 +846,23 @@ class PortalSet:
                            2 * np.pi)
         return np.where(height > 0, omega, 0.0)
 
+    def through(self, x: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """(N, K) whether rays from points ``x`` (N, 3) along unit ``directions`` (K, 3) leave
+        through a portal (cross one from its room side, ahead of the point)."""
+        out = np.zeros((len(x), len(directions)), bool)
+        for k in range(len(self)):
+            c, n = self.centers[k], self.normals[k]
+            du2, dv2 = self.du[k] @ self.du[k], self.dv[k] @ self.dv[k]
+            denom = directions @ n                                        # (K,)
+            outward = denom < -1e-12
+            t = ((c - x) @ n)[:, None] / np.where(outward, denom, -1.0)[None]   # (N, K)
+            su = (((x - c) @ self.du[k])[:, None] + t * (directions @ self.du[k])[None]) / du2
+            sv = (((x - c) @ self.dv[k])[:, None] + t * (directions @ self.dv[k])[None]) / dv2
+            inside = (su * su + sv * sv <= 1.0) if self.round[k] else \
+                ((np.abs(su) <= 1.0) & (np.abs(sv) <= 1.0))
+            out |= inside & (t > 0) & outward[None]
+        return out
+
     def pdf(self, x: np.ndarray, w: np.ndarray, weights: np.ndarray) -> np.ndarray:
         """Solid-angle density (N,) [1/sr] of directions ``w`` from ``x`` under portal
         sampling with selection ``weights`` (N, P) (rows summing to 1 or 0): sum over the
@@ -866,9 +888,13 @@ class EnvironmentLight:
     """The world as a sampled light when it is an image (``environment.Environment``) or has
     portals. Each sample picks one of three strategies, and its weight is cos / p with p the
     mixture of the three densities (one-sample MIS, balance heuristic: Veach 1997, 9.2.4):
-    * through a portal facing the point (share ``PORTAL_SHARE`` where one does): a portal by
-      its approximate solid angle, an area-uniform point on it;
-    * the image's CDF (``ENV_CDF_SHARE`` of the rest; a constant world: cosine instead);
+    * through a portal facing the point (share ``PORTAL_SHARE`` where one does, less
+      ``PORTAL_SHIFT`` x phi, phi the share of a fixed set of ``PORTAL_PROBES``^2 directions
+      drawn from the image's CDF that leave through a portal from the point: where the sun
+      shines through the window the CDF finds it, the portal's area-uniform points seldom
+      do): a portal by its approximate solid angle, an area-uniform point on it;
+    * the image's CDF (``ENV_CDF_SHARE`` of the rest, plus the portals' ``PORTAL_SHIFT`` x
+      phi; a constant world: cosine instead);
     * cosine directions about the normal (the rest), which keep sky light seen past an
       occluder that takes the CDF's samples (under an overhang) low in noise.
     A sample's radiance is the image's along its direction (``rgb`` per sample:
@@ -884,6 +910,10 @@ class EnvironmentLight:
         self.portals = PortalSet(world.portals)
         self.rgb = np.ones(3)
         self.cdf_share = ENV_CDF_SHARE if self.environment is not None else 0.0
+        self.probes = np.zeros((0, 3))
+        if self.environment is not None and len(self.portals):
+            u = sampling.stratified_2d(1, PORTAL_PROBES ** 2, np.random.default_rng(0))[0]
+            self.probes = self.environment.sample(np.clip(u, 0.0, 1.0 - 1e-12))[0]
 
     def radiance(self, directions):
         if self.environment is not None:
@@ -901,6 +931,19 @@ class EnvironmentLight:
         faces = total > 0
         return w / np.where(faces, total, 1.0)[:, None], faces
 
+    def _shares(self, x, faces):
+        """Per point (N,): the shares of the portal, CDF and cosine strategies (class
+        docstring); a function of the point alone, so ``sample_rgb`` and
+        ``solid_angle_pdf`` agree."""
+        portal = np.where(faces, PORTAL_SHARE, 0.0)
+        if len(self.probes) and faces.any():
+            phi = np.zeros(len(x))
+            phi[faces] = self.portals.through(x[faces], self.probes).mean(axis=1)
+            portal = portal - PORTAL_SHIFT * phi * faces
+        cdf = np.where(faces, (1.0 - PORTAL_SHARE) * self.cdf_share, self.cdf_share)
+        cdf = cdf + (np.where(faces, PORTAL_SHARE, 0.0) - portal)
+        return portal, cdf, 1.0 - portal - cdf
+
     def solid_angle_pdf(self, points, normals, wi):
         """Density (N,) [1/sr] of this light's samples at ``points`` with ``normals`` giving
         directions ``wi`` (the mixture of ``sample_rgb``)."""
@@ -909,12 +952,11 @@ class EnvironmentLight:
         w = np.asarray(wi, np.float64).reshape(-1, 3)
         cos_pdf = np.maximum(_dot(n, w), 0.0) / np.pi
         env_pdf = self.environment.direction_pdf(w) if self.environment is not None else 0.0
-        rest = self.cdf_share * env_pdf + (1.0 - self.cdf_share) * cos_pdf
         sel, faces = self._portal_weights(x)
         if not faces.any():
-            return rest
-        portal_pdf = self.portals.pdf(x, w, sel)
-        return np.where(faces, PORTAL_SHARE * portal_pdf + (1 - PORTAL_SHARE) * rest, rest)
+            return self.cdf_share * env_pdf + (1.0 - self.cdf_share) * cos_pdf
+        portal, cdf, cos = self._shares(x, faces)
+        return portal * self.portals.pdf(x, w, sel) + cdf * env_pdf + cos * cos_pdf
 
     def sample_rgb(self, x, n, u):
         """Directions, shadow distances (inf), scalar weights cos / p and radiance (N, 3)."""
@@ -924,11 +966,15 @@ class EnvironmentLight:
         w = np.empty((count, 3))
         pick = u[:, 0].copy()
         sel, faces = self._portal_weights(x)
-        portal = faces & (pick < PORTAL_SHARE)
-        pick = np.where(faces, np.where(portal, pick / PORTAL_SHARE,
-                                        (pick - PORTAL_SHARE) / (1 - PORTAL_SHARE)), pick)
+        p_share, c_share, _ = self._shares(x, faces)
+        portal = faces & (pick < p_share)
+        # The CDF and cosine strategies read their number rescaled to [0, 1) over the rest,
+        # split at cdf_share as where no portal faces the point.
+        rest = np.maximum(1.0 - p_share, 1e-300)
+        pick = np.where(portal, pick / np.where(portal, p_share, 1.0), (pick - p_share) / rest)
+        split = c_share / rest
         pick = np.clip(pick, 0.0, 1.0 - 1e-12)
-        env = ~portal & (pick < self.cdf_share)
+        env = ~portal & (pick < split)
         cos = ~portal & ~env
         if portal.any():
             idx = np.flatnonzero(portal)
@@ -943,12 +989,13 @@ class EnvironmentLight:
             w[idx] = d / np.maximum(np.linalg.norm(d, axis=1), 1e-300)[:, None]
         if env.any():
             idx = np.flatnonzero(env)
-            uu = np.stack([pick[idx] / self.cdf_share, u[idx, 1]], 1)
+            uu = np.stack([pick[idx] / split[idx], u[idx, 1]], 1)
             w[idx] = self.environment.sample(np.clip(uu, 0.0, 1.0 - 1e-12))[0]
         if cos.any():
             idx = np.flatnonzero(cos)
-            lo = self.cdf_share
-            uu = np.stack([np.clip((pick[idx] - lo) / (1.0 - lo), 0.0, 1.0 - 1e-12), u[idx, 1]], 1)
+            lo = split[idx]
+            uu = np.stack([np.clip((pick[idx] - lo) / np.maximum(1.0 - lo, 1e-300), 0.0,
+                                   1.0 - 1e-12), u[idx, 1]], 1)
             t, b = sampling.orthonormal_basis(n64[idx])
             w[idx] = sampling.to_world(sampling.square_to_cosine_hemisphere(uu), t, b, n64[idx])
         pdf = self.solid_angle_pdf(x, n64, w)

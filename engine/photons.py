@@ -18,7 +18,12 @@ What it computes (seed sections 9.1-9.5, corrections in DESIGN.md §4)
         / n, pbrt-v3 ``InfiniteAreaLight::Sample_Le``), or, with light portals, through them
         (``_portal_photons``: a point on a portal, a direction into the room from the mixture
         of the CDF and cosine, power L cos A / (p n); photons whose way out to the sky is
-        blocked are dropped, which needs ``emit_photons``'s ``accel``).
+        blocked are dropped, which needs ``emit_photons``'s ``accel``), plus
+        ``EXTERIOR_SHARE`` (0.25) of the world's photons from its disc as without portals,
+        less those whose first segment enters a portal unblocked (the portal photons carry
+        that light; ``_enters_portal``): the light on what lies outside the portals (a
+        window's outer reveal, the ground seen through it) that the gather reads there. The
+        two sets split the sky's first segments between them, so together they are unbiased.
     ``trace_photons(scene, accel, emitted, rng)``  all photons advance together through
         Embree; at each hit Russian roulette (9.2) with Pd, Ps the largest channels of the
         reflectances (``roulette_probabilities``) chooses diffuse / specular / absorb and
@@ -62,6 +67,8 @@ from .npzjson import pack_json, unpack_json
 from .scene import MAX_COORDINATE, MAX_VALUE, AreaLight, PointLight, Scene, SpotLight, SunLight
 from .bsdf import MaterialTable, sample_glossy
 from .surfaces import SceneSurfaces
+
+EXTERIOR_SHARE = 0.25     # with portals: the world's photons from its disc, outside them
 
 
 def _spread_bits(v: np.ndarray) -> np.ndarray:
@@ -161,16 +168,23 @@ def _light_fluxes(scene: Scene):
             picks = areas * sides * (surface.exitance @ LUMINANCE)
             out.append(("emissive meshes", flux, ("mesh", emissive, picks, mids)))
     world = scene.world
-    if not world.is_black and world.portals:
-        # Through the portals: the flux crossing them, A int L(w) cos dw per portal.
-        portals = PortalSet(world.portals)
-        cos_weighted = _cosine_weighted_radiance(world, portals)
-        flux = (portals.areas[:, None] * cos_weighted).sum(axis=0)
-        out.append(("World", flux, ("portal", world, portals)))
-    elif not world.is_black:
+    if not world.is_black:
         total = (world.environment.integral() if world.environment is not None
                  else world.radiance * 4 * np.pi)
-        out.append(("World", total * np.pi * radius ** 2, ("world", center, radius)))
+        disc_flux = total * np.pi * radius ** 2
+        if world.portals:
+            # Through the portals: the flux crossing them, A int L(w) cos dw per portal.
+            portals = PortalSet(world.portals)
+            cos_weighted = _cosine_weighted_radiance(world, portals)
+            flux = (portals.areas[:, None] * cos_weighted).sum(axis=0)
+            out.append(("World", flux, ("portal", world, portals)))
+            # Outside them: the disc's photons whose first segment does not enter a portal
+            # (the sky's light on the window's outer reveal, the ground seen through it);
+            # ``EXTERIOR_SHARE`` of the world's photons whatever their flux.
+            out.append(("World outside the portals", disc_flux,
+                        ("world", center, radius, portals, float(flux @ LUMINANCE))))
+        else:
+            out.append(("World", disc_flux, ("world", center, radius, None, 0.0)))
     return out
 
 
@@ -216,6 +230,9 @@ def emit_photons(scene: Scene, count: int, rng: np.random.Generator,
     # photon carries flux / (its light's count), so the share moves noise, not energy.
     lum = np.array([max(float(flux @ LUMINANCE), 1e-30) * getattr(spec[1], "photon_share", 1.0)
                     for _, flux, spec in lights])
+    for i, (_, _, spec) in enumerate(lights):
+        if spec[0] == "world" and spec[3] is not None:     # photons outside the portals
+            lum[i] = spec[4] * EXTERIOR_SHARE / (1.0 - EXTERIOR_SHARE)
     share = np.maximum(np.floor(count * lum / lum.sum()).astype(int), 1)
     origins, directions, powers, per_light = [], [], [], {}
     centers, r2s = [], []
@@ -289,6 +306,11 @@ def emit_photons(scene: Scene, count: int, rng: np.random.Generator,
             t, b = sampling.orthonormal_basis(d)
             disk = sampling.square_to_disk(v) * radius
             o = center - d * (2 * radius) + disk[:, 0:1] * t + disk[:, 1:2] * b
+            if spec[3] is not None:
+                # Outside the portals: those entering one first are the portal photons'.
+                keep = np.flatnonzero(~_enters_portal(o, d, spec[3], accel)
+                                      & (power.max(axis=1) > 0))
+                o, d, power, n = o[keep], d[keep], power[keep], len(keep)
         else:  # the world through its portals
             o, d, power = _portal_photons(scene, spec[1], spec[2], u, v, n, accel)
             keep = np.flatnonzero(power.max(axis=1) > 0)      # those that saw the sky
@@ -357,6 +379,32 @@ def _portal_photons(scene, world, portals, u, v, n, accel):
                                  np.full(len(idx), 1e37, np.float32))
         power[idx[blocked]] = 0.0
     return points + travel * eps, travel, power
+
+
+def _enters_portal(origins, directions, portals, accel) -> np.ndarray:
+    """(N,) whether each ray (from outside the scene) crosses a portal from its outer side
+    before it meets geometry (``accel``; without one, any crossing counts)."""
+    best = np.full(len(origins), np.inf)
+    for k in range(len(portals)):
+        c, nrm = portals.centers[k], portals.normals[k]
+        denom = directions @ nrm
+        inward = denom > 1e-12
+        t = np.where(inward, ((c - origins) @ nrm) / np.where(inward, denom, 1.0), np.inf)
+        q = origins + np.where(np.isfinite(t), t, 0.0)[:, None] * directions - c
+        su = q @ portals.du[k] / (portals.du[k] @ portals.du[k])
+        sv = q @ portals.dv[k] / (portals.dv[k] @ portals.dv[k])
+        inside = (su * su + sv * sv <= 1.0) if portals.round[k] else \
+            ((np.abs(su) <= 1.0) & (np.abs(sv) <= 1.0))
+        best = np.where(inward & inside & (t > 0) & (t < best), t, best)
+    crossing = np.isfinite(best)
+    if accel is None or not crossing.any():
+        return crossing
+    idx = np.flatnonzero(crossing)
+    blocked = accel.occluded(np.ascontiguousarray(origins[idx], np.float32),
+                             np.ascontiguousarray(directions[idx], np.float32),
+                             np.ascontiguousarray(best[idx] * (1 - 1e-6), np.float32))
+    crossing[idx[blocked]] = False
+    return crossing
 
 
 ESTIMATE_CHUNK = 8192           # queries per kd-tree call in PhotonMap.irradiance

@@ -87,3 +87,32 @@ def test_section_replaced_and_the_rest_kept():
     twice = materials.replace_section(middle, materials.SECTION_TITLE + "\n\nnew\n")
     assert twice == doc + "\n" + materials.SECTION_TITLE + "\n\nnew\n\n## Later\n\nkept\n"
     assert materials.section_of(doc) is None
+
+
+def test_worlds_suite_check_at_256_and_its_own_section():
+    data = _run_data()
+    data["suite"] = "worlds"
+    yard = data["scenes"].pop("principled_room")
+    yard["scene"] = "yard"
+    data["scenes"] = {"yard": yard}
+    rows = yard["cycles_rows"]                     # CURVE: 256 spp = 16 s at 0.1
+    check = materials.check_at_samples(yard)      # final: 10 s at 0.1
+    assert check["samples"] == 256 and check["error_ok"] and check["time_ratio"] == pytest.approx(10 / 16)
+    assert check["met"] is False                   # 0.625 > 0.5
+    yard["lanterna"]["seconds"] = 7.0
+    assert materials.check_at_samples(yard)["met"] is True
+    yard["lanterna"]["error"] = 0.11               # above Cycles-256's error: missed
+    assert materials.check_at_samples(yard)["met"] is False
+    assert materials.check_at_samples({"cycles_rows": rows[:2], "lanterna": {}}) is None
+    section = materials.section_markdown(data, "materials/worlds.png")
+    title = materials.SUITES["worlds"].section
+    assert section.startswith(title + "\n") and "lanterna bench --materials --worlds" in section
+    assert "tests/world_scenes.py" in section and "misses issue 24's check" in section
+    # both suites' sections live side by side; each rewrite keeps the other
+    doc = materials.replace_section("# P\n", materials.section_markdown(_run_data(), "p.png"))
+    both = materials.replace_section(doc, section, title)
+    assert materials.section_of(both, title) == section
+    assert materials.section_of(both) == materials.section_of(doc)
+    with pytest.raises(materials.BenchError):
+        materials.parse_args(["--worlds", "--scenes", "principled_room"])
+    assert materials.parse_args(["--worlds"]).scenes == ["yard", "window_room"]

@@ -1,16 +1,29 @@
 """HDRI-world parity with Cycles (issue 24): Lanterna's ``final`` preset against the Cycles
 reference of ``tests/data/make_world_refs.py`` (scenes: ``tests/world_scenes.py``), 4 x 4
 region means of luminance, bright regions (over a tenth of the brightest) within the issue's
-bound of 2 %.
+bounds: 2 % for the yard, 3 % for the portal interior.
 
 Measured (``final``; worst bright region; the whole image's ratio), reference 4 x 512 spp,
 worst region relative SE 0.028 %:
 
-=======  =====  ==================  ==================  ==================
-scene    bound  seed 1              seed 2              seed 3
-=======  =====  ==================  ==================  ==================
-yard     2 %    0.75 % (0.9985)     1.20 % (0.9987)     0.71 % (0.9970)
-=======  =====  ==================  ==================  ==================
+===========  =====  ==================  ==================  ==================
+scene        bound  seed 1              seed 2              seed 3
+===========  =====  ==================  ==================  ==================
+yard         2 %    0.75 % (0.9985)     1.20 % (0.9987)     0.71 % (0.9970)
+window_room  3 %    1.63 % (1.0016)     1.68 % (1.0002)     1.90 % (1.0048)
+===========  =====  ==================  ==================  ==================
+
+``window_room`` (an interior lit only through a window with a light portal): reference
+4 x 2048 spp, worst bright region relative SE 0.53 %; seed 4 gives 2.64 % (1.0044). Over
+seeds 1-4 the bright regions' means are within 1.1 % of Cycles and their spread (SD) is
+0.5-1.6 %, largest in the two regions the sun patch's edges cross (its direct light). Before
+this test: 3.0 / 3.0 / 4.0 % at seeds 1-3 (whole image 0.983 / 0.990 / 0.986): sky photons
+entered through the portals only, so the window's outer reveal (outside the portal, in the
+wall's thickness), lit by sun and sky, was dark to the gather; ``photons.EXTERIOR_SHARE`` of
+the world's photons now come from its disc outside the portals (whole image 0.989 / 0.998 /
+1.000, worst 2.1 / 1.2 / 2.8 %, seed 4 4.8 %), and the portal strategy's share of the light
+samples gives way to the CDF's where the CDF sees out through the window (``lights``'
+``PORTAL_SHIFT``: the sun patch's direct light, block SD 2.6 -> 1.3 %).
 
 Before issue 24 the same world exported as a flat colour (its Background Color, the image
 ignored): the issue measured such an exterior at 0.03 x Cycles' mean.
@@ -52,3 +65,8 @@ def worst_bright_region(name, seed=1):
 @pytest.mark.parity
 def test_hdri_yard_matches_cycles_within_2_percent():
     assert worst_bright_region("yard") <= 0.02
+
+
+@pytest.mark.parity
+def test_portal_interior_matches_cycles_within_3_percent():
+    assert worst_bright_region("window_room") <= 0.03
