@@ -27,7 +27,7 @@ bpy = pytest.importorskip("bpy")
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 import texture_scenes  # noqa: E402
-from test_parity_cycles import block_means  # noqa: E402
+from test_parity_materials import render_against_reference, worst_bright_ratio  # noqa: E402
 
 pytestmark = pytest.mark.parity
 
@@ -39,25 +39,12 @@ _RENDERS: dict = {}
 
 def _render(name, seed=1):
     if (name, seed) not in _RENDERS:
-        from lanterna.engine.blender.export import export_scene
-        from lanterna.engine.pipeline import RenderSettings, render
-
-        texture_scenes.build(name)
-        scene = export_scene(bpy.context.evaluated_depsgraph_get())
-        image = np.asarray(render(scene, RenderSettings(seed=seed, preset="final")).image,
-                           np.float64)
-        assert np.all(np.isfinite(image))
-        _RENDERS[(name, seed)] = image
-    return _RENDERS[(name, seed)], np.load(REF_DIR / f"{name}.npz")
+        _RENDERS[(name, seed)] = render_against_reference(name, seed, texture_scenes, REF_DIR)
+    return _RENDERS[(name, seed)]
 
 
 def test_textured_room_within_2_percent():
-    image, ref = _render("textured_room")
-    grid = tuple(int(v) for v in ref["grid"])
-    ours = block_means(image, grid) @ LUMINANCE
-    theirs = ref["region_mean"] @ LUMINANCE
-    bright = theirs > 0.1 * theirs.max()
-    worst = float(np.abs(ours[bright] / theirs[bright] - 1).max())
+    worst = worst_bright_ratio(*_render("textured_room"))
     assert worst <= 0.02, worst
 
 

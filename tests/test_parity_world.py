@@ -31,7 +31,6 @@ ignored): the issue measured such an exterior at 0.03 x Cycles' mean.
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
@@ -39,27 +38,17 @@ bpy = pytest.importorskip("bpy")
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 import world_scenes  # noqa: E402
-from test_parity_cycles import block_means  # noqa: E402
+from test_parity_materials import render_against_reference, worst_bright_ratio  # noqa: E402
 
 REF_DIR = HERE / "data" / "cycles_world"
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 
 def worst_bright_region(name, seed=1):
-    from lanterna.engine.blender.export import export_scene
-    from lanterna.engine.pipeline import RenderSettings, render
+    def image_world(scene):
+        assert scene.world.environment is not None, scene.warnings
 
-    world_scenes.build(name)
-    scene = export_scene(bpy.context.evaluated_depsgraph_get())
-    assert scene.world.environment is not None, scene.warnings
-    ref = np.load(REF_DIR / f"{name}.npz")
-    image = np.asarray(render(scene, RenderSettings(seed=seed, preset="final")).image,
-                       np.float64)
-    assert np.all(np.isfinite(image))
-    ours = block_means(image, tuple(int(v) for v in ref["grid"])) @ LUMINANCE
-    theirs = ref["region_mean"] @ LUMINANCE
-    bright = theirs > 0.1 * theirs.max()
-    return float(np.abs(ours[bright] / theirs[bright] - 1).max())
+    return worst_bright_ratio(*render_against_reference(name, seed, world_scenes, REF_DIR,
+                                                        check=image_world))
 
 
 @pytest.mark.parity
