@@ -151,9 +151,45 @@ class MaterialTable:
         self.has_transport_specular = bool(self.is_transport_specular.any())
         self.has_emission = bool(self.is_emissive.any())
         self.count = len(self.diffuse)
+        # Materials whose Normal nodes drive (``Material.shading_normal``: a Normal Map).
+        self.normal_mapped = np.array([getattr(m, "shading_normal", None) is not None
+                                       for m in scene.materials], bool)
+        self.has_shading_normals = bool(self.normal_mapped.any())
         # Where no input is node-driven every parameter is one value per material: stages
         # may then work on per-material tables (the camera's histogram of direct light).
         self.constant_per_material = not self.textures.any
+
+    def shading_normals(self, material_ids, prim, bu, bv, x, ns, ng, wo, front) -> np.ndarray:
+        """(N, 3) float32: the shading normals at camera hits, ``ns`` (the smooth normal
+        turned to the viewer) replaced on materials with a node-driven Normal by what their
+        nodes give (``textures.MaterialTextures.shading_normal``, one evaluation per
+        material), turned to the viewer's side. As Cycles keeps a mapped normal from
+        reflecting the view below the surface (``ensure_valid_specular_reflection``), a hit
+        whose mapped normal would mirror ``wo`` below the geometric normal ``ng`` (or that
+        is not finite) keeps ``ns``: a simpler guard than Cycles' bend towards it.
+        ``x`` [m] the hits, ``wo`` (N, 3) unit towards the viewer, ``front`` (N,) bool
+        front-face hits."""
+        material_ids = np.asarray(material_ids)
+        out = np.array(ns, np.float32, copy=True)
+        for material_id in np.flatnonzero(self.normal_mapped):
+            rows = np.flatnonzero(material_ids == material_id)
+            if len(rows) == 0:
+                continue
+            hit_values = {"normal_world": ns[rows].astype(np.float64),
+                          "true_normal_world": ng[rows].astype(np.float64),
+                          "incoming": wo[rows].astype(np.float64),
+                          "backfacing": (~np.asarray(front)[rows]).astype(np.float64),
+                          "position_world": x[rows].astype(np.float64)}
+            n = self.textures.shading_normal(int(material_id), prim[rows], bu[rows], bv[rows],
+                                             hit_values)
+            n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+            n = np.where((np.einsum("ij,ij->i", n, hit_values["normal_world"]) < 0)[:, None],
+                         -n, n)
+            mirrored = reflect(-hit_values["incoming"], n)
+            ok = np.all(np.isfinite(n), axis=1) & (
+                np.einsum("ij,ij->i", mirrored, hit_values["true_normal_world"]) > 0)
+            out[rows[ok]] = n[ok]
+        return out
 
     def at(self, material_ids: np.ndarray, prim=None, bu=None, bv=None) -> "SurfaceParams":
         """The parameters at hits on triangles of ``material_ids`` (N,): the one function

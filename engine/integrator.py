@@ -447,6 +447,13 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
             surface = surface.subset(shaded)
             pixel_of = rays // spp
 
+        # A node-driven Normal (a Normal Map) shades what the camera path computes here:
+        # direct light and the glossy and glass lobes; the indirect estimates (cache, gather,
+        # photons, caustics) keep the smooth normal ``ns_smooth`` their records were made at.
+        ns_smooth = ns
+        if materials.has_shading_normals:
+            ns = materials.shading_normals(surface.material, prim, bu, bv, x, ns, ng, -d, front)
+
         glossy = None
         if materials.has_glossy:
             glossy = _GlossyHits(materials, surface, -d, ns, front,
@@ -474,7 +481,7 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
                 ask = ask[(s - first_lookup[s // spp]) % spp < photon.lookups]
             if len(ask):
                 t0 = time.perf_counter()
-                e = photon.irradiance(x[ask], ns[ask], ng[ask], rng, stats)
+                e = photon.irradiance(x[ask], ns_smooth[ask], ng[ask], rng, stats)
                 stats["estimate_seconds"] += time.perf_counter() - t0
                 covered = stats.pop("covered_mask", None)
                 if usage is not None and covered is not None:
@@ -485,7 +492,7 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
                 _add_irradiance(e, ask, surface, glossy, thr, rays, spp, depth, indirect_sums,
                                 light, direct_light and not probe_lookup)
         if idx is not None and direct_light and context.caustics is not None:
-            _shade_caustics(context, stats, idx, x, ns, surface, glossy, thr, rays, spp,
+            _shade_caustics(context, stats, idx, x, ns_smooth, surface, glossy, thr, rays, spp,
                             depth, indirect_sums, light, probe_lookup)
         if idx is not None and direct_light:
             _shade_direct(context, stats, rng, depth, idx, x, ns, ng, surface, thr, rays,

@@ -101,6 +101,9 @@ class Material:
     # The node graph (``engine.nodes.Graph``) that node-driven closure inputs read
     # (``Closure.textures``; ``engine/textures.py``); None when no input is node-driven.
     graph: object = None
+    # The graph socket (node name, output) of a node-driven Normal (a Normal Map), the
+    # world-space shading normal at camera hits (``bsdf.MaterialTable.shading_normals``).
+    shading_normal: tuple | None = None
 
     def __post_init__(self):
         self.diffuse = _rgb(self.diffuse, self.name, "diffuse reflectance")
@@ -404,7 +407,9 @@ class Scene:
     warnings: list[str] = field(default_factory=list)
     stats: dict = field(default_factory=dict)
     # Per-corner coordinates that textured materials read, name -> (T, 3, k) float32
-    # ("uv", "uv:<name>", "position", "normal", "generated"; ``engine/textures.py``).
+    # ("uv", "uv:<name>", "position", "normal", "generated"; for shading normals also
+    # "tangent" / "tangent:<name>" (T, 3, 4) and "normal_matrix" (T, 3, 3), one matrix per
+    # triangle, not per corner; ``engine/textures.py``).
     corner_attributes: dict = field(default_factory=dict)
 
     def __post_init__(self):

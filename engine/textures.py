@@ -58,7 +58,7 @@ from .shaders import CLOSURE_KINDS, seed_reduction
 
 __all__ = ["MaterialTextures", "HitInputs", "approximations", "interpolate_corners",
            "lookups_per_hit", "EMISSION_PARAMS", "MEAN_SAMPLES",
-           "PARAM_RANGES", "EXACT_PARAMS"]
+           "PARAM_RANGES", "EXACT_PARAMS", "PER_TRIANGLE"]
 
 # Area-uniform points per textured material for the means the lobes use.
 MEAN_SAMPLES = 4096
@@ -93,26 +93,37 @@ def interpolate_corners(corner: np.ndarray, prim, bu, bv) -> np.ndarray:
     return c[:, 0] * (1.0 - u - v) + c[:, 1] * u + c[:, 2] * v
 
 
+# Per-triangle attributes among ``Scene.corner_attributes``: taken, not interpolated.
+PER_TRIANGLE = ("normal_matrix",)
+
+
 class HitInputs(Mapping):
     """The per-hit coordinates ``nodes.evaluate`` reads at hits (prim, bu, bv): each corner
-    attribute interpolated only when a node first asks for it, then kept."""
+    attribute interpolated only when a node first asks for it, then kept (a per-triangle one,
+    ``PER_TRIANGLE``, taken as it is); ``hit_values``: per-hit arrays given as they are (the
+    world-space values of a camera hit: ``bsdf.MaterialTable.shading_normals``)."""
 
-    def __init__(self, corners: dict, prim, bu, bv):
-        self._corners, self._hits, self._done = corners, (prim, bu, bv), {}
+    def __init__(self, corners: dict, prim, bu, bv, hit_values: dict | None = None):
+        self._corners, self._hits = corners, (prim, bu, bv)
+        self._done = dict(hit_values or {})
 
     def __getitem__(self, key):
         if key not in self._done:
-            self._done[key] = interpolate_corners(self._corners[key], *self._hits)
+            if key in PER_TRIANGLE:
+                self._done[key] = np.take(self._corners[key], self._hits[0],
+                                          axis=0).astype(np.float64)
+            else:
+                self._done[key] = interpolate_corners(self._corners[key], *self._hits)
         return self._done[key]
 
     def __contains__(self, key):
-        return key in self._corners
+        return key in self._corners or key in self._done
 
     def __iter__(self):
-        return iter(self._corners)
+        return iter(set(self._corners) | set(self._done))
 
     def __len__(self):
-        return len(self._corners)
+        return len(set(self._corners) | set(self._done))
 
 
 def _as_param(value: np.ndarray, kind_default, graph, socket) -> np.ndarray:
@@ -237,6 +248,16 @@ class MaterialTextures:
         """The per-hit coordinates ``nodes.evaluate`` reads, at hits (prim, bu, bv)
         (interpolated when first read)."""
         return HitInputs(self.corners, prim, bu, bv)
+
+    def shading_normal(self, material_id: int, prim, bu, bv, hit_values: dict) -> np.ndarray:
+        """(k, 3) the world-space normal that the material's node-driven Normal
+        (``Material.shading_normal``, a Normal Map) gives at hits (prim, bu, bv) on its
+        triangles; ``hit_values``: the hits' world-space inputs (``nodes`` module docstring:
+        "normal_world", "true_normal_world", "incoming", "backfacing", "position_world")."""
+        material = self.scene.materials[material_id]
+        inputs = HitInputs(self.corners, prim, bu, bv, hit_values)
+        return np.asarray(nodes.evaluate(material.graph, tuple(material.shading_normal),
+                                         inputs, len(prim)), np.float64)
 
     def closures_at(self, material_id: int, prim, bu, bv, part: str = "all") -> list:
         """The material's closures with per-hit parameters at hits (prim, bu, bv); the

@@ -197,6 +197,9 @@ class _MeshData:
     uv_maps: dict = dataclasses.field(default_factory=dict)   # name -> (L, 2) float32
     active_uv: str = ""     # the active render UV map's name
     texspace: tuple | None = None   # (location (3,), size (3,)) of the texture space
+    # UV map name -> (L, 4) float32 MikkTSpace tangent and bitangent sign per corner (read only
+    # for meshes whose materials have a shading normal: ``_read_tangents``)
+    tangents: dict | None = None
 
     @property
     def count(self) -> int:
@@ -272,6 +275,58 @@ def _read_mesh(mesh) -> _MeshData | None:
                      corner_loops, uv_maps, active_uv, texspace)
 
 
+def _read_tangents(mesh, data: _MeshData, warn, owner: str) -> dict:
+    """UV map name -> (L, 4) float32: the MikkTSpace tangent (x, y, z) and bitangent sign per
+    corner, as Blender's ``calc_tangents`` gives them (what Cycles interpolates for a
+    tangent-space Normal Map). Where Blender cannot (faces of more than four corners), the
+    triangles' own UV gradients, orthogonalised to each corner's normal, with a warning."""
+    out = {}
+    n_corner = len(mesh.loops)
+    for name in data.uv_maps:
+        try:
+            mesh.calc_tangents(uvmap=name)
+            t = np.empty(n_corner * 3, np.float32)
+            sign = np.empty(n_corner, np.float32)
+            mesh.loops.foreach_get("tangent", t)
+            mesh.loops.foreach_get("bitangent_sign", sign)
+            out[name] = np.concatenate([t.reshape(-1, 3), sign[:, None]], axis=1)
+        except (RuntimeError, AttributeError) as error:
+            warn(f"{owner}: Blender gives no tangents for UV map '{name}' ({error}); the "
+                 "Normal Map uses each triangle's UV gradient instead")
+            out[name] = _gradient_tangents(data, data.uv_maps[name], n_corner)
+        finally:
+            free = getattr(mesh, "free_tangents", None)
+            if free is not None:
+                free()
+    return out
+
+
+def _gradient_tangents(data: _MeshData, uv: np.ndarray, n_corner: int) -> np.ndarray:
+    """(L, 4) float32 tangents from each triangle's UV gradient dP/du, orthogonalised to the
+    corner normal, with the bitangent sign of dP/dv (corners of several triangles keep the
+    last)."""
+    n_tri = data.count
+    p = data.co[data.tri_verts].reshape(n_tri, 3, 3).astype(np.float64)
+    t_uv = uv[data.corner_loops].reshape(n_tri, 3, 2).astype(np.float64)
+    dp1, dp2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    du1, dv1 = t_uv[:, 1, 0] - t_uv[:, 0, 0], t_uv[:, 1, 1] - t_uv[:, 0, 1]
+    du2, dv2 = t_uv[:, 2, 0] - t_uv[:, 0, 0], t_uv[:, 2, 1] - t_uv[:, 0, 1]
+    det = du1 * dv2 - du2 * dv1
+    inv = np.where(np.abs(det) > 1e-20, 1.0 / np.where(det == 0, 1.0, det), 0.0)[:, None]
+    tangent = (dp1 * dv2[:, None] - dp2 * dv1[:, None]) * inv
+    bitangent = (dp2 * du1[:, None] - dp1 * du2[:, None]) * inv
+    out = np.zeros((n_corner, 4), np.float32)
+    n = data.corner_normals[data.tri_loops].reshape(n_tri, 3, 3).astype(np.float64)
+    corners = data.corner_loops.reshape(n_tri, 3)
+    for k in range(3):
+        t = tangent - np.einsum("ij,ij->i", tangent, n[:, k])[:, None] * n[:, k]
+        t /= np.maximum(np.linalg.norm(t, axis=1), 1e-20)[:, None]
+        sign = np.where(np.einsum("ij,ij->i", np.cross(n[:, k], t), bitangent) < 0, -1.0, 1.0)
+        out[corners[:, k], :3] = t
+        out[corners[:, k], 3] = sign
+    return out
+
+
 def _read_uv_maps(mesh, n_corner: int):
     """({name: (L, 2) float32}, the active render map's name) of ``mesh``'s UV maps."""
     maps, active = {}, ""
@@ -312,6 +367,12 @@ def _corner_attribute(data: _MeshData, key: str) -> np.ndarray:
         size = np.where(np.abs(size) > 1e-12, size, 1.0)
         generated = (co - (location - size)) / (2.0 * size)
         return generated[data.tri_verts].astype(np.float32).reshape(n_tri, 3, 3)
+    if key.startswith("tangent"):
+        name = data.active_uv if key == "tangent" else key[8:]
+        tangent = (data.tangents or {}).get(name)
+        if tangent is None:
+            return np.zeros((n_tri, 3, 4), np.float32)
+        return tangent[data.corner_loops].reshape(n_tri, 3, 4)
     name = data.active_uv if key == "uv" else key[3:]
     uv = data.uv_maps.get(name)
     if uv is None:
@@ -385,24 +446,41 @@ _PARAM_SOCKETS = {
     "sheen": {"color": [("Color",)], "roughness": [("Roughness",)]},
 }
 _COORDINATE_KEYS = ("uv", "position", "normal", "generated")
+# What a shading normal's nodes (Normal Map) may read besides those: the per-corner MikkTSpace
+# tangents, the per-triangle normal matrix, and the camera hit's own world-space values
+# (``nodes`` module docstring), which the integrator hands over (``bsdf.MaterialTable``).
+_NORMAL_KEYS = ("tangent", "normal_matrix")
+_HIT_KEYS = ("normal_world", "true_normal_world", "incoming", "backfacing", "position_world")
 
 
 class _CoordinateRecorder(dict):
     """Per-hit inputs for a trial evaluation of a node graph at one point: answers every
-    coordinate ``Scene.corner_attributes`` can hold with zeros and records which were read."""
+    coordinate ``Scene.corner_attributes`` can hold with zeros and records which were read;
+    with ``shading_normal`` also what a Normal Map reads (``_NORMAL_KEYS``, ``_HIT_KEYS``)."""
 
-    def __init__(self):
+    def __init__(self, shading_normal: bool = False):
         super().__init__()
         self.asked: set = set()
+        self.keys = _COORDINATE_KEYS + (_NORMAL_KEYS + _HIT_KEYS if shading_normal else ())
 
     def __contains__(self, key) -> bool:
-        return isinstance(key, str) and key.split(":", 1)[0] in _COORDINATE_KEYS
+        return isinstance(key, str) and key.split(":", 1)[0] in self.keys
 
     def __getitem__(self, key):
         if key not in self:
             raise KeyError(key)
-        self.asked.add(key)
+        if key not in _HIT_KEYS:
+            self.asked.add(key)
+        if key == "normal_matrix":
+            return np.eye(3)[None]
+        if key == "backfacing":
+            return np.zeros(1)
+        if key.startswith("tangent"):
+            return np.array([[1.0, 0.0, 0.0, 1.0]])
         return np.zeros((1, 2) if key.startswith("uv") else (1, 3))
+
+    def get(self, key, default=None):
+        return self[key] if key in self else default
 
 
 class _NodeReader:
@@ -421,14 +499,16 @@ class _NodeReader:
         self.driven: dict = {}
         self.values: dict = {}
         self.coordinates: set = set()     # per-corner coordinates the graphs read
+        self.normals: list = []           # (shader node, graph socket) of driven Normals
 
-    def _graph_socket(self, src_node, out):
+    def _graph_socket(self, src_node, out, shading_normal: bool = False):
         """(node name, output identifier) when the evaluator supports the nodes feeding this
-        output (a trial evaluation), else None with the reason."""
+        output (a trial evaluation; ``shading_normal``: as a Normal input, which may read
+        tangents and the hit's world-space values), else None with the reason."""
         if self.graph is None:
             self.graph = export_graph(self.tree, self.warn, self.images)
         socket = (src_node.name, out.identifier)
-        recorder = _CoordinateRecorder()
+        recorder = _CoordinateRecorder(shading_normal)
         try:
             nodes.evaluate(self.graph, socket, recorder, n=1)
         except nodes.UnsupportedNode as error:
@@ -531,16 +611,26 @@ class _NodeReader:
         return self._constant(node, names, default, _as_scalar, "value")
 
     def check_normal(self, node, socket_name: str = "Normal") -> None:
-        """Warn when a vector input (Normal, Coat Normal, Tangent) is linked: bump and normal
-        maps and custom tangents are ignored."""
+        """A linked vector input (Normal, Coat Normal, Tangent). A shader's Normal driven by
+        nodes the evaluator supports (Normal Map, vector maths ...) becomes the material's
+        shading normal (``normals``: (shader node, graph socket)); anything else (Bump, Coat
+        Normal, custom tangents) is ignored with a warning."""
         sock = node.inputs.get(socket_name)
         src = self.source(sock) if sock is not None else None
-        if src is not None:
-            label = src[0].bl_label
-            what = ("custom tangents are ignored" if socket_name == "Tangent"
-                    else "bump and normal mapping are ignored")
-            self.warn(f"{self.owner}: {socket_name} of '{node.name}' is driven by "
-                      f"{_article(label)} {label} node; {what}")
+        if src is None:
+            return
+        label = src[0].bl_label
+        reason = ""
+        if socket_name == "Normal" and self.tree is not None:
+            socket, reason = self._graph_socket(*src, shading_normal=True)
+            if socket is not None:
+                self.normals.append((node.name, socket))
+                return
+        what = ("custom tangents are ignored" if socket_name == "Tangent"
+                else "bump and normal mapping are ignored")
+        why = f" ({reason})" if reason else ""
+        self.warn(f"{self.owner}: {socket_name} of '{node.name}' is driven by "
+                  f"{_article(label)} {label} node; {what}{why}")
 
     # Shaders -------------------------------------------------------------------------------
     def _principled(self, node) -> Closure:
@@ -704,6 +794,10 @@ def _coordinates_read(materials) -> set:
     ``materials`` read, by a trial evaluation of each at one point."""
     keys: set = set()
     for material in materials:
+        if getattr(material, "shading_normal", None) is not None:
+            recorder = _CoordinateRecorder(shading_normal=True)
+            nodes.evaluate(material.graph, tuple(material.shading_normal), recorder, n=1)
+            keys |= recorder.asked
         for closure in material.closures:
             for factors in closure.textures.values():
                 for socket, _constant in factors:
@@ -764,8 +858,29 @@ def material_from_nodes(mat, warn=None, images: dict | None = None) -> Material:
         warn(f"{reader.owner}: {note}")
     d, s, e = _clamp_reflectances(name, seed.diffuse, seed.specular, seed.exitance, warn)
     textured = any(c.textures for c in closures)
+    shading_normal = _shading_normal(reader, closures, warn)
     return Material(name, diffuse=d, specular=s, exitance=e, closures=tuple(closures),
-                    graph=reader.graph if textured else None)
+                    graph=reader.graph if textured or shading_normal else None,
+                    shading_normal=shading_normal)
+
+
+def _shading_normal(reader: _NodeReader, closures, warn) -> tuple | None:
+    """The graph socket of the material's node-driven Normal (``Material.shading_normal``),
+    with a warning saying what it shapes; a second, different one is named and ignored."""
+    used = {c.node for c in closures}
+    found = [(node, socket) for node, socket in reader.normals if node in used]
+    if not found:
+        return None
+    node, socket = found[0]
+    label = reader.graph.nodes[socket[0]].type.removeprefix("ShaderNode")
+    warn(f"{reader.owner}: Normal of '{node}' ({label} '{socket[0]}') shades camera hits "
+         "(direct light, glossy and glass reflections); indirect diffuse light, photons and "
+         "the irradiance cache use the smooth normal")
+    for other, other_socket in found[1:]:
+        if tuple(other_socket) != tuple(socket):
+            warn(f"{reader.owner}: Normal of '{other}' differs from that of '{node}'; one "
+                 f"shading normal per material: '{node}''s is used for all its shaders")
+    return tuple(socket)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1085,6 +1200,14 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
         group.matrices.append(matrix)
         group.names.append(name)
 
+    def read_tangents(obj, mesh, data) -> None:
+        """The mesh's tangents, once, when a material of ``obj`` has a shading normal."""
+        if data is None or data.tangents is not None or not data.uv_maps:
+            return
+        slots = [material_id(s.material) for s in obj.material_slots]
+        if any(materials[i].shading_normal is not None for i in slots):
+            data.tangents = _read_tangents(mesh, data, warn, f"Object '{obj.name}'")
+
     # Walk the instances: one Python step per object or instance, never per triangle.
     for inst in depsgraph.object_instances:
         obj = inst.object
@@ -1126,6 +1249,7 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
             key = ("mesh", obj.data.as_pointer())
             if key not in mesh_cache:              # read once per mesh datablock
                 mesh_cache[key] = _read_mesh(obj.data)
+            read_tangents(obj, obj.data, mesh_cache[key])
             add_instance(obj, key, name, matrix)
         elif not inst.is_instance:
             # Curves, surfaces, text and metaballs: Blender 3+ hands their evaluated mesh over
@@ -1142,6 +1266,7 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
             mesh = None
         try:
             mesh_cache[key] = _read_mesh(mesh) if mesh is not None else None
+            read_tangents(obj, mesh, mesh_cache[key])
         finally:
             obj.to_mesh_clear()
         add_instance(obj, key, name, matrix)
@@ -1202,15 +1327,19 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
             object_ids[start:end] = np.repeat(group.object_ids[c0:c0 + step], n_tri)
             start = end
 
-    corner_attributes = {key: np.zeros((total, 3, 2 if key.startswith("uv") else 3),
-                                       np.float32)
+    width = {"uv": 2, "tangent": 4}
+    corner_attributes = {key: np.zeros((total, 3, width.get(key.split(":")[0], 3)), np.float32)
                          for key in sorted(_coordinates_read(materials))}
     start = 0
     for group in groups.values():
         n_tri, n = group.data.count, len(group.matrices)
         for key, out_array in corner_attributes.items():
-            out_array[start:start + n * n_tri].reshape(n, n_tri, 3, -1)[:] = \
-                _corner_attribute(group.data, key)
+            block = out_array[start:start + n * n_tri].reshape(n, n_tri, 3, -1)
+            if key == "normal_matrix":
+                # Per triangle, not per corner: the instance's object-to-world normal matrix.
+                block[:] = _normal_matrices(group.matrices[:, :3, :3])[:, None, :, :]
+            else:
+                block[:] = _corner_attribute(group.data, key)
         start += n * n_tri
 
     world = _export_world(scene_eval.world, warn, portals)
