@@ -159,7 +159,8 @@ class MaterialTable:
         # may then work on per-material tables (the camera's histogram of direct light).
         self.constant_per_material = not self.textures.any
 
-    def shading_normals(self, material_ids, prim, bu, bv, x, ns, ng, wo, front) -> np.ndarray:
+    def shading_normals(self, material_ids, prim, bu, bv, x, ns, ng, wo, front,
+                        footprint=None) -> np.ndarray:
         """(N, 3) float32: the shading normals at camera hits, ``ns`` (the smooth normal
         turned to the viewer) replaced on materials with a node-driven Normal by what their
         nodes give (``textures.MaterialTextures.shading_normal``, one evaluation per
@@ -168,7 +169,10 @@ class MaterialTable:
         whose mapped normal would mirror ``wo`` below the geometric normal ``ng`` (or that
         is not finite) keeps ``ns``: a simpler guard than Cycles' bend towards it.
         ``x`` [m] the hits, ``wo`` (N, 3) unit towards the viewer, ``front`` (N,) bool
-        front-face hits."""
+        front-face hits, ``footprint`` (N,) [m] the width of the pixel's footprint at each hit
+        (default 1 mm): Bump's finite differences step across it, along two orthogonal
+        tangents of the geometric normal as Cycles' compact ray differentials do (for a height
+        smooth at the pixel's scale the bumped normal does not depend on the width)."""
         material_ids = np.asarray(material_ids)
         out = np.array(ns, np.float32, copy=True)
         for material_id in np.flatnonzero(self.normal_mapped):
@@ -180,6 +184,8 @@ class MaterialTable:
                           "incoming": wo[rows].astype(np.float64),
                           "backfacing": (~np.asarray(front)[rows]).astype(np.float64),
                           "position_world": x[rows].astype(np.float64)}
+            hit_values.update(self._footprint(prim[rows], hit_values["true_normal_world"],
+                                              1e-3 if footprint is None else footprint[rows]))
             n = self.textures.shading_normal(int(material_id), prim[rows], bu[rows], bv[rows],
                                              hit_values)
             n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
@@ -189,6 +195,34 @@ class MaterialTable:
             ok = np.all(np.isfinite(n), axis=1) & (
                 np.einsum("ij,ij->i", mirrored, hit_values["true_normal_world"]) > 0)
             out[rows[ok]] = n[ok]
+        return out
+
+    def _footprint(self, prim, n, width) -> dict:
+        """dPdx, dPdy (k, 3) [m]: two orthogonal tangents of length ``width`` at hits with
+        unit geometric normals ``n`` (dPdx x dPdy along n: Cycles' compact differentials
+        spread the same way around Ng), and bary_dx, bary_dy (k, 2): the changes of
+        the barycentrics (bu, bv) of triangles ``prim`` along them (least squares on the
+        triangle's edges)."""
+        # Cycles' frame (``make_orthonormals``): (1, 1, 1) x n, or (-1, 1, 1) x n where n has
+        # equal components.
+        x, y, z = n[:, 0], n[:, 1], n[:, 2]
+        equal = (x == y) & (x == z)
+        e1 = np.stack([z - y, np.where(equal, x + z, x - z), np.where(equal, -y - x, y - x)],
+                      axis=1)
+        e1 /= np.maximum(np.linalg.norm(e1, axis=1, keepdims=True), 1e-300)
+        e2 = np.cross(n, e1)
+        w = np.broadcast_to(np.asarray(width, np.float64), (len(n),))[:, None]
+        dpdx, dpdy = e1 * w, e2 * w
+        tri = np.take(self.textures.scene.triangles, prim, axis=0).astype(np.float64)
+        a, b = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+        aa, ab, bb = (np.einsum("ij,ij->i", *pair) for pair in ((a, a), (a, b), (b, b)))
+        det = aa * bb - ab * ab
+        inv = np.where(det > 0, 1.0 / np.where(det > 0, det, 1.0), 0.0)
+        out = {"dPdx": dpdx, "dPdy": dpdy}
+        for axis, dp in (("x", dpdx), ("y", dpdy)):
+            pa, pb = np.einsum("ij,ij->i", dp, a), np.einsum("ij,ij->i", dp, b)
+            out[f"bary_d{axis}"] = np.stack([(bb * pa - ab * pb) * inv,
+                                              (aa * pb - ab * pa) * inv], axis=1)
         return out
 
     def at(self, material_ids: np.ndarray, prim=None, bu=None, bv=None) -> "SurfaceParams":

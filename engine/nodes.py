@@ -91,6 +91,7 @@ to vector/colour by repetition.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -741,6 +742,37 @@ SUPPORTED = frozenset({
     "ShaderNodeVectorCurve", "ShaderNodeFloatCurve", "ShaderNodeNormalMap", "ShaderNodeBump"})
 
 
+class ShiftedInputs(Mapping):
+    """Per-hit inputs moved along one axis of the hits' footprint (``_Eval.shifted``): key k
+    reads k + width x "d<axis>:k" (for "position_world" without its own differential,
+    "dPd<axis>"); differentials themselves and keys without one are read unchanged."""
+
+    def __init__(self, inputs, axis: str, width):
+        self.base, self.axis, self.width = inputs, axis, np.asarray(width, float)
+
+    def __getitem__(self, key):
+        v = self.base[key]
+        if key.startswith(("dx:", "dy:")) or key in ("dPdx", "dPdy"):
+            return v
+        d = self.base.get(f"d{self.axis}:{key}")
+        if d is None and key == "position_world":
+            d = self.base.get(f"dPd{self.axis}")
+        if d is None:
+            return v
+        v = np.asarray(v, float)
+        w = self.width
+        return v + (w.reshape(-1, *([1] * (v.ndim - 1))) if w.ndim else w) * d
+
+    def __contains__(self, key):
+        return key in self.base
+
+    def __iter__(self):
+        return iter(self.base)
+
+    def __len__(self):
+        return len(self.base)
+
+
 class _Eval:
     def __init__(self, graph: Graph, inputs: dict, n: int):
         self.g, self.inputs, self.n = graph, inputs, n
@@ -802,20 +834,10 @@ class _Eval:
     def shifted(self, axis: str, width) -> "_Eval":
         """An evaluator at the hits moved by ``width`` times the footprint along ``axis``
         ("x" or "y"): each per-hit input k with a differential "d<axis>:k" becomes
-        k + width * d<axis>:k ("position_world" moves by dP<axis> unless given its own);
-        the others stay (Cycles' bump evaluation at P + dP * filter width)."""
-        w = np.asarray(width, float)
-        moved = dict(self.inputs)
-        for k, v in self.inputs.items():
-            if k.startswith(("dx:", "dy:")) or k in ("dPdx", "dPdy"):
-                continue
-            d = self.inputs.get(f"d{axis}:{k}")
-            if d is None and k == "position_world":
-                d = self.inputs.get(f"dP{axis}")
-            if d is not None:
-                v = np.asarray(v, float)
-                moved[k] = v + (w.reshape(-1, *([1] * (v.ndim - 1))) if w.ndim else w) * d
-        return _Eval(self.g, moved, self.n)
+        k + width * d<axis>:k ("position_world" moves by dPd<axis> unless given its own);
+        the others stay (Cycles' bump evaluation at P + dP * filter width). The moved inputs
+        are computed when a node reads them (:class:`ShiftedInputs`)."""
+        return _Eval(self.g, ShiftedInputs(self.inputs, axis, width), self.n)
 
     def vector_or(self, node: Node, ident: str, default_key: str):
         """A texture's Vector input, or the per-hit coordinate used when it is unlinked."""

@@ -101,7 +101,9 @@ class HitInputs(Mapping):
     """The per-hit coordinates ``nodes.evaluate`` reads at hits (prim, bu, bv): each corner
     attribute interpolated only when a node first asks for it, then kept (a per-triangle one,
     ``PER_TRIANGLE``, taken as it is); ``hit_values``: per-hit arrays given as they are (the
-    world-space values of a camera hit: ``bsdf.MaterialTable.shading_normals``)."""
+    world-space values of a camera hit: ``bsdf.MaterialTable.shading_normals``); with
+    ``"bary_dx"`` / ``"bary_dy"`` (N, 2) among them, ``"dx:<key>"`` / ``"dy:<key>"`` are the
+    corner attributes' changes across the hit's footprint (what Bump reads)."""
 
     def __init__(self, corners: dict, prim, bu, bv, hit_values: dict | None = None):
         self._corners, self._hits = corners, (prim, bu, bv)
@@ -109,6 +111,16 @@ class HitInputs(Mapping):
 
     def __getitem__(self, key):
         if key not in self._done:
+            axis, _, base = key.partition(":")
+            if axis in ("dx", "dy") and base in self._corners and base not in PER_TRIANGLE \
+                    and f"bary_{axis}" in self._done:
+                # The attribute's change across the footprint: its barycentric derivative
+                # (``bary_dx`` / ``bary_dy`` (N, 2): d(bu, bv) along the footprint's axes).
+                c = np.take(self._corners[base], self._hits[0], axis=0).astype(np.float64)
+                duv = self._done[f"bary_{axis}"]
+                self._done[key] = (duv[:, :1] * (c[:, 1] - c[:, 0])
+                                   + duv[:, 1:] * (c[:, 2] - c[:, 0]))
+                return self._done[key]
             if key in PER_TRIANGLE:
                 self._done[key] = np.take(self._corners[key], self._hits[0],
                                           axis=0).astype(np.float64)
@@ -117,6 +129,9 @@ class HitInputs(Mapping):
         return self._done[key]
 
     def __contains__(self, key):
+        axis, _, base = key.partition(":")
+        if axis in ("dx", "dy") and f"bary_{axis}" in self._done:
+            return base in self._corners and base not in PER_TRIANGLE
         return key in self._corners or key in self._done
 
     def __iter__(self):
@@ -253,7 +268,8 @@ class MaterialTextures:
         """(k, 3) the world-space normal that the material's node-driven Normal
         (``Material.shading_normal``, a Normal Map) gives at hits (prim, bu, bv) on its
         triangles; ``hit_values``: the hits' world-space inputs (``nodes`` module docstring:
-        "normal_world", "true_normal_world", "incoming", "backfacing", "position_world")."""
+        "normal_world", "true_normal_world", "incoming", "backfacing", "position_world", and
+        for Bump the footprint "dPdx", "dPdy" with its barycentric "bary_dx", "bary_dy")."""
         material = self.scene.materials[material_id]
         inputs = HitInputs(self.corners, prim, bu, bv, hit_values)
         return np.asarray(nodes.evaluate(material.graph, tuple(material.shading_normal),

@@ -24,7 +24,7 @@ SUN = 3.0
 ALBEDO = 0.8
 
 
-def _build(tilt: float, uv_turn: bool, space: str = "TANGENT"):
+def _build(tilt: float, uv_turn: bool, space: str = "TANGENT", bump: str = ""):
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     scene.render.resolution_x = scene.render.resolution_y = 16
@@ -42,13 +42,33 @@ def _build(tilt: float, uv_turn: bool, space: str = "TANGENT"):
     out = tree.nodes.new("ShaderNodeOutputMaterial")
     diffuse = tree.nodes.new("ShaderNodeBsdfDiffuse")
     diffuse.inputs["Color"].default_value = (ALBEDO, ALBEDO, ALBEDO, 1.0)
-    normal_map = tree.nodes.new("ShaderNodeNormalMap")
-    normal_map.space = space
-    colour = tree.nodes.new("ShaderNodeRGB")
-    colour.outputs[0].default_value = (0.5 + 0.5 * math.sin(tilt), 0.5,
-                                       0.5 + 0.5 * math.cos(tilt), 1.0)
-    tree.links.new(colour.outputs[0], normal_map.inputs["Color"])
-    tree.links.new(normal_map.outputs["Normal"], diffuse.inputs["Normal"])
+    if bump:
+        # Height h = -tan(tilt) x (x read through ``bump``): Bump's normal z - grad h leans
+        # by ``tilt`` towards +x.
+        node = tree.nodes.new("ShaderNodeBump")
+        node.inputs["Distance"].default_value = 1.0
+        if bump == "object":
+            coords = tree.nodes.new("ShaderNodeTexCoord")
+            position = coords.outputs["Object"]
+        else:
+            coords = tree.nodes.new("ShaderNodeNewGeometry")
+            position = coords.outputs["Position"]
+        split = tree.nodes.new("ShaderNodeSeparateXYZ")
+        scale = tree.nodes.new("ShaderNodeMath")
+        scale.operation = "MULTIPLY"
+        scale.inputs[1].default_value = -math.tan(tilt)
+        tree.links.new(position, split.inputs[0])
+        tree.links.new(split.outputs["X"], scale.inputs[0])
+        tree.links.new(scale.outputs[0], node.inputs["Height"])
+        tree.links.new(node.outputs["Normal"], diffuse.inputs["Normal"])
+    else:
+        normal_map = tree.nodes.new("ShaderNodeNormalMap")
+        normal_map.space = space
+        colour = tree.nodes.new("ShaderNodeRGB")
+        colour.outputs[0].default_value = (0.5 + 0.5 * math.sin(tilt), 0.5,
+                                           0.5 + 0.5 * math.cos(tilt), 1.0)
+        tree.links.new(colour.outputs[0], normal_map.inputs["Color"])
+        tree.links.new(normal_map.outputs["Normal"], diffuse.inputs["Normal"])
     tree.links.new(diffuse.outputs[0], out.inputs["Surface"])
     plane.data.materials.append(mat)
     sun = bpy.data.lights.new("Sun", "SUN")
@@ -101,6 +121,20 @@ def _cycles_mean(scene, tmp_path):
 ])
 def test_normal_map_shades_direct_light_as_cycles(tilt, uv_turn, cos_expected, tmp_path):
     scene = _build(tilt, uv_turn)
+    expected = ALBEDO / math.pi * SUN * cos_expected
+    ours = _lanterna_mean(scene)
+    cycles = _cycles_mean(scene, tmp_path)
+    assert np.allclose(cycles, expected, rtol=5e-3), (cycles, expected)
+    assert np.allclose(ours, expected, rtol=5e-3), (ours, expected)
+
+
+@pytest.mark.parametrize("bump", ["object", "position"])
+@pytest.mark.parametrize("tilt, cos_expected", [(ALPHA, 1.0), (-ALPHA, math.cos(2 * ALPHA))])
+def test_bump_shades_direct_light_as_cycles(bump, tilt, cos_expected, tmp_path):
+    """A Bump of a height linear in x (Texture Coordinate > Object, or Geometry > Position):
+    the normal leans by ``tilt``; its finite differences step across the pixel's footprint,
+    through the corner attributes' barycentric derivatives or the hit's position."""
+    scene = _build(tilt, False, bump=bump)
     expected = ALBEDO / math.pi * SUN * cos_expected
     ours = _lanterna_mean(scene)
     cycles = _cycles_mean(scene, tmp_path)

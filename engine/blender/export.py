@@ -450,7 +450,9 @@ _COORDINATE_KEYS = ("uv", "position", "normal", "generated")
 # tangents, the per-triangle normal matrix, and the camera hit's own world-space values
 # (``nodes`` module docstring), which the integrator hands over (``bsdf.MaterialTable``).
 _NORMAL_KEYS = ("tangent", "normal_matrix")
-_HIT_KEYS = ("normal_world", "true_normal_world", "incoming", "backfacing", "position_world")
+_HIT_KEYS = ("normal_world", "true_normal_world", "incoming", "backfacing", "position_world",
+             "dPdx", "dPdy")
+_DIFFERENTIAL_KEYS = ("dx", "dy")     # "dx:<key>": the change of <key> across the footprint
 
 
 class _CoordinateRecorder(dict):
@@ -461,7 +463,8 @@ class _CoordinateRecorder(dict):
     def __init__(self, shading_normal: bool = False):
         super().__init__()
         self.asked: set = set()
-        self.keys = _COORDINATE_KEYS + (_NORMAL_KEYS + _HIT_KEYS if shading_normal else ())
+        self.keys = _COORDINATE_KEYS + (_NORMAL_KEYS + _HIT_KEYS + _DIFFERENTIAL_KEYS
+                                        if shading_normal else ())
 
     def __contains__(self, key) -> bool:
         return isinstance(key, str) and key.split(":", 1)[0] in self.keys
@@ -469,12 +472,15 @@ class _CoordinateRecorder(dict):
     def __getitem__(self, key):
         if key not in self:
             raise KeyError(key)
-        if key not in _HIT_KEYS:
-            self.asked.add(key)
+        base = key.split(":", 1)[1] if key.split(":", 1)[0] in _DIFFERENTIAL_KEYS else key
+        if base in _HIT_KEYS:
+            return np.zeros(1) if base == "backfacing" else np.zeros((1, 3))
+        if base != key and base.split(":", 1)[0] not in self.keys:
+            raise KeyError(key)
+        self.asked.add(base)
+        key = base
         if key == "normal_matrix":
             return np.eye(3)[None]
-        if key == "backfacing":
-            return np.zeros(1)
         if key.startswith("tangent"):
             return np.array([[1.0, 0.0, 0.0, 1.0]])
         return np.zeros((1, 2) if key.startswith("uv") else (1, 3))
