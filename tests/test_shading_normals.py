@@ -13,6 +13,8 @@ Without the mapped normal (the smooth normal +z) the radiance is 0.8 / pi x 3 x 
 13 % below the mapped value at ALPHA = 30 degrees, far outside these bounds (0.5 %).
 """
 import math
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -140,3 +142,86 @@ def test_bump_shades_direct_light_as_cycles(bump, tilt, cos_expected, tmp_path):
     cycles = _cycles_mean(scene, tmp_path)
     assert np.allclose(cycles, expected, rtol=5e-3), (cycles, expected)
     assert np.allclose(ours, expected, rtol=5e-3), (ours, expected)
+
+
+def _wavy_plane():
+    """A 4 m plane whose Principled BSDF (Roughness 0.5, so the specular layer shows the
+    normals too) reads a tangent-space normal map image: ridges along v, the normal leaning
+    +-0.5 rad towards u as sin(2 pi 3 u); under a 1 m area light, tilted, and a black world."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.resolution_x, scene.render.resolution_y = 48, 32
+    bpy.ops.mesh.primitive_plane_add(size=4.0)
+    plane = bpy.context.object
+    size = 64
+    u = (np.arange(size) + 0.5) / size
+    lean = 0.5 * np.sin(2 * np.pi * 3 * u)
+    texel = np.zeros((size, size, 4), np.float32)
+    texel[..., 0] = 0.5 + 0.5 * np.sin(lean)[None, :]
+    texel[..., 1] = 0.5
+    texel[..., 2] = 0.5 + 0.5 * np.cos(lean)[None, :]
+    texel[..., 3] = 1.0
+    image = bpy.data.images.new("Ridges", size, size, float_buffer=True)
+    image.colorspace_settings.name = "Non-Color"
+    image.pixels.foreach_set(texel.ravel())
+    image.pack()
+    mat = bpy.data.materials.new("Ridged")
+    mat.use_nodes = True
+    tree = mat.node_tree
+    bsdf = tree.nodes["Principled BSDF"]
+    bsdf.inputs["Base Color"].default_value = (0.7, 0.5, 0.3, 1.0)
+    tex = tree.nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    normal_map = tree.nodes.new("ShaderNodeNormalMap")
+    tree.links.new(tex.outputs["Color"], normal_map.inputs["Color"])
+    tree.links.new(normal_map.outputs["Normal"], bsdf.inputs["Normal"])
+    plane.data.materials.append(mat)
+    light = bpy.data.lights.new("Area", "AREA")
+    light.energy = 200.0
+    light.size = 1.0
+    light_obj = bpy.data.objects.new("Area", light)
+    light_obj.location = (2.0, 0.5, 2.0)
+    light_obj.rotation_euler = (0.0, math.radians(45.0), 0.0)
+    scene.collection.objects.link(light_obj)
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    cam.location = (0.0, -3.0, 3.0)
+    cam.rotation_euler = (math.radians(45.0), 0.0, 0.0)
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    world = bpy.data.worlds.new("World")
+    world.use_nodes = True
+    world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
+    scene.world = world
+    return scene
+
+
+def test_image_normal_map_regions_match_cycles(tmp_path):
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    """The ridged plane's 4 x 4 region means against Cycles (256 spp, rendered here): within
+    3 %. Measured against Cycles at 1024 spp: worst region 1.65 / 1.69 / 1.73 % at seeds
+    1 / 2 / 3 (the left column 1-2 % bright at every seed); with the smooth normal instead
+    87.5 % (regions from 0.65 to 2.07 of Cycles)."""
+    from test_parity_cycles import block_means
+
+    scene = _wavy_plane()
+    from lanterna.engine.blender.export import export_scene
+    from lanterna.engine.pipeline import RenderSettings, render
+
+    exported = export_scene(bpy.context.evaluated_depsgraph_get())
+    ours = np.asarray(render(exported, RenderSettings(seed=1, preset="final")).image,
+                      np.float64)
+    scene.render.engine = "CYCLES"
+    scene.cycles.samples = 256
+    scene.cycles.use_denoising = False
+    scene.render.image_settings.file_format = "OPEN_EXR"
+    scene.render.filepath = str(tmp_path / "cycles.exr")
+    bpy.ops.render.render(write_still=True)
+    cycles_image = bpy.data.images.load(str(tmp_path / "cycles.exr"))
+    theirs = np.array(cycles_image.pixels[:], np.float64).reshape(32, 48, 4)[::-1, :, :3]
+    luminance = np.array([0.2126, 0.7152, 0.0722])
+    a = block_means(ours, (4, 4)) @ luminance
+    b = block_means(theirs, (4, 4)) @ luminance
+    bright = b > 0.1 * b.max()
+    worst = float(np.abs(a[bright] / b[bright] - 1).max())
+    print("worst region", worst)
+    assert worst <= 0.03
