@@ -727,7 +727,8 @@ def _principled_lobes(c, lobes):
 def glossy_material(closures) -> GlossyMaterial | None:
     """The glossy and glass lobes of a material's closures (``engine/shaders.py``): Principled
     (metal, transmission and dielectric layer), Glossy (Fresnel = its colour), Metallic (F82
-    tint or the physical conductor), Glass and Refraction closures; None when there are none.
+    tint or the physical conductor), Glass, Refraction and Transparent closures; None when
+    there are none.
     Diffuse, emission and the rest stay with the seed's reduction (``shaders.seed_reduction``)."""
     lobes, layer, tops = [], None, []
     for c in closures:
@@ -785,6 +786,11 @@ def glossy_material(closures) -> GlossyMaterial | None:
             lobes.append(GlassLobe(c.weight.copy(), float(p["roughness"]) ** 2,
                                    max(float(p["ior"]), 1e-5), reflection, color.copy(), None,
                                    multiscatter))
+        elif c.kind == "transparent":
+            # Straight through, tinted by its colour: a smooth interface of index 1 that
+            # reflects nothing (Cycles' Transparent BSDF; Principled Alpha < 1 mixes one in).
+            lobes.append(GlassLobe(c.weight.copy(), 0.0, 1.0, np.zeros(3),
+                                   np.clip(p["color"], 0, None).copy(), None, False))
     if not lobes:
         return None
     return GlossyMaterial(lobes, layer, tops)

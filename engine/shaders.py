@@ -22,7 +22,9 @@ closure        seed material (weight w multiplies each line)
 =============  ================================================================================
 principled     rho_d = Base Color (1 - Metallic)(1 - Transmission); rho_s = Base Color x
                Metallic + sqrt(Base Color)(1 - Metallic) Transmission, the roulette's shares
-               (alpha and a thin film on the transmission: reported when they matter).
+               (a thin film on the transmission and node-driven alpha: reported; a constant
+               Alpha < 1 is exported as Cycles composes it, a Transparent closure of
+               weight 1 - Alpha beside the Principled one of weight Alpha).
                Sheen, coat, the metal, the dielectric specular layer (thin film on both
                through the Fresnel; ``bsdf.MaterialTable.transport_*`` for photons and gather
                rays) and the transmission are rendered everywhere by their lobes
@@ -34,8 +36,9 @@ metallic       rho_s = Base Color (F82) or ((n-1)^2 + k^2) / ((n+1)^2 + k^2) (ph
                Fresnel
 glass,         rho_s = Color: rendered everywhere (camera, photons, gather) by its glass lobe
 refraction     (``bsdf.GlassLobe``: smooth or GGX dielectric); rho_s is its roulette share
-transparent,   black (reported)
-holdout
+transparent    rho_s = Color, the roulette's share; rendered everywhere by a glass lobe of
+               index 1 (straight through; behind it lit by photons, not shadow rays: reported)
+holdout        black (reported)
 translucent    rho_d = Color (reported)
 sheen          rho_s = Color, the roulette's share; rendered everywhere by the microfibre lobe
                (``bsdf.SheenLobe``; Ashikhmin is reported and rendered as Microfiber)
@@ -176,7 +179,8 @@ def _principled(c: Closure, note):
         note(f"Thin Wall of {name} is ignored: its transmission is rendered as a solid "
              "glass object's surface")
     if np.any(p["alpha"] < 1):
-        note(f"Alpha < 1 of {name} is ignored (rendered opaque)")
+        note(f"Alpha {_fmt(np.mean(p['alpha']))} of {name} (driven by nodes) is ignored "
+             "(rendered opaque)")
     if np.any(p["subsurface_weight"] > 0) and metallic_max < 1 and transmission_max < 1:
         note(f"Subsurface Weight {_fmt(np.mean(p['subsurface_weight']))} of {name} is approximated: "
              "rendered as a diffuse lobe of the Base Color (no subsurface scattering)")
@@ -222,9 +226,14 @@ def seed_reduction(closures) -> SeedMaterial:
             # Rendered by its glass lobe (``bsdf.GlassLobe``) everywhere; rho_s is its share
             # in the photons' roulette and marks it as a surface rays go on from.
             s = np.asarray(p["color"], np.float64)
-        elif c.kind in ("transparent", "holdout"):
-            label = "Transparent BSDF" if c.kind == "transparent" else "Holdout"
-            note(f"{label} {name} is not supported; rendered black")
+        elif c.kind == "transparent":
+            # Rendered by a glass lobe of index 1 (``bsdf.glossy_material``): rays and
+            # photons go straight through; rho_s is its share of the roulette.
+            s = np.asarray(p["color"], np.float64)
+            note(f"Transparent BSDF {name}: light reaches what lies behind it through camera "
+                 "rays and photons (the caustic map), not through shadow rays as in Cycles")
+        elif c.kind == "holdout":
+            note(f"Holdout {name} is not supported; rendered black")
         elif c.kind == "translucent":
             d = p["color"]
             note(f"Translucent BSDF {name} is not supported; treated as a diffuse of colour "
@@ -283,6 +292,8 @@ def lobe_names(closures) -> list[str]:
             add("specular (metal, physical)" if p["physical"] else "specular (metal, F82 tint)")
         elif c.kind in ("glass", "refraction"):
             add("transmission")
+        elif c.kind == "transparent":
+            add("transparent")
         else:
             add(c.kind)
     return names

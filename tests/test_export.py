@@ -275,15 +275,21 @@ def test_every_principled_input_reaches_its_closure():
     p.inputs["Emission Strength"].default_value = 2.0
     cube.data.materials.append(mat)
     s = export()
-    (closure,) = material_of(s, "AllInputs").closures
+    # Alpha < 1 mixes a Transparent BSDF in, as Cycles does: weights Alpha and 1 - Alpha.
+    closure, transparent = material_of(s, "AllInputs").closures
     assert closure.kind == "principled" and closure.node == p.name
-    assert len(present) >= 18
+    alpha = present.pop("alpha")
+    np.testing.assert_allclose(closure.weight, alpha, rtol=1e-6)
+    assert transparent.kind == "transparent" and transparent.node == p.name
+    np.testing.assert_allclose(transparent.weight, 1 - alpha, rtol=1e-5)
+    assert len(present) >= 17
     for key, value in present.items():
         np.testing.assert_allclose(closure.params[key], value, rtol=1e-6, err_msg=key)
     np.testing.assert_allclose(closure.params["emission"], [2.0, 1.0, 0.5], rtol=1e-6)
-    # What today's renderer cannot show is named (alpha); coat and sheen are rendered, unnamed.
+    # What the renderer shows differently from Cycles is named (the transparent part's
+    # shadows); coat and sheen are rendered, unnamed.
     said = " ".join(w for w in s.warnings if "'AllInputs'" in w)
-    assert "Alpha" in said
+    assert "Transparent BSDF" in said
     assert "Coat" not in said and "Sheen" not in said
 
 

@@ -717,7 +717,15 @@ class _NodeReader:
                       f"input; using grey diffuse {DEFAULT_DIFFUSE}")
             return grey
         if t == "BSDF_PRINCIPLED":
-            return [self._principled(node)]
+            principled = self._principled(node)
+            alpha = principled.params["alpha"]
+            if alpha < 1 and "alpha" not in principled.textures:
+                # Cycles: Alpha mixes a Transparent BSDF in, (1 - Alpha) of the light.
+                principled.params["alpha"] = 1.0
+                return [principled.scaled(alpha),
+                        Closure("transparent", params={"color": np.ones(3)},
+                                node=node.name).scaled(1.0 - alpha)]
+            return [principled]
         if t == "BSDF_DIFFUSE":
             self.check_normal(node)
             return [self.attach_textures(Closure("diffuse", params={
