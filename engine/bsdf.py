@@ -62,13 +62,14 @@ from . import fresnel as fresnel_model
 from . import microfacet
 from . import sampling
 from .textures import MaterialTextures
-from .lobes import (MicrofacetGlass, MicrofacetReflection, Sheen, SmoothGlass,
+from .lobes import (MicrofacetGlass, MicrofacetReflection, OrenNayar, Sheen, SmoothGlass,
                     SmoothReflection)
 
 __all__ = ["MaterialTable", "SurfaceParams", "Lambertian", "PerfectMirror", "SurfaceBSDF",
            "roulette_probabilities", "reflect", "GlossyLobe", "GlassLobe", "GlossyMaterial",
            "glossy_material", "sample_glossy", "layer_diffuse_factor", "layer_average",
-           "material_averages", "reflection_albedo", "SheenLobe", "TopLayer", "lobe_shares"]
+           "material_averages", "reflection_albedo", "SheenLobe", "TopLayer", "lobe_shares",
+           "diffuse_roughness", "RoughDiffuseHits"]
 
 # Below this alpha_x alpha_y a microfacet lobe is a mirror (Cycles' delta threshold).
 DELTA_ALPHA2 = 2e-10
@@ -151,6 +152,11 @@ class MaterialTable:
         self.has_transport_specular = bool(self.is_transport_specular.any())
         self.has_emission = bool(self.is_emissive.any())
         self.count = len(self.diffuse)
+        # Oren-Nayar roughness sigma of each material's diffuse (``diffuse_roughness``):
+        # 0 for Lambert's.
+        self.diffuse_sigma = np.array([diffuse_roughness(c) for c in
+                                       self.textures.mean_closures], np.float64)
+        self.has_oren_nayar = bool(np.any(self.diffuse_sigma > 0))
         # Materials whose Normal nodes drive (``Material.shading_normal``: a Normal Map).
         self.normal_mapped = np.array([getattr(m, "shading_normal", None) is not None
                                        for m in scene.materials], bool)
@@ -794,6 +800,58 @@ def glossy_material(closures) -> GlossyMaterial | None:
     if not lobes:
         return None
     return GlossyMaterial(lobes, layer, tops)
+
+
+def diffuse_roughness(closures) -> float:
+    """The Oren-Nayar roughness sigma of a material's diffuse: Principled Diffuse Roughness
+    and Diffuse BSDF Roughness, averaged over its diffuse closures by the weight of their
+    diffuse (one diffuse lobe per material: ``shaders.seed_reduction`` names a material whose
+    diffuse closures differ)."""
+    total = weighted = 0.0
+    for c in closures:
+        p = c.params
+        if c.kind == "principled":
+            share = (1 - float(np.clip(np.mean(p["metallic"]), 0, 1))) * \
+                (1 - float(np.clip(np.mean(p["transmission"]), 0, 1)))
+            sigma = float(np.mean(p["diffuse_roughness"]))
+        elif c.kind == "diffuse":
+            share, sigma = 1.0, float(np.mean(p["roughness"]))
+        else:
+            continue
+        w = float(np.mean(c.weight)) * share
+        total += w
+        weighted += w * float(np.clip(sigma, 0, 1))
+    return weighted / total if total > 0 else 0.0
+
+
+class RoughDiffuseHits:
+    """The hits of one camera-path vertex whose diffuse is Oren-Nayar (``MaterialTable.
+    diffuse_sigma`` > 0; Cycles' model, ``lobes.OrenNayar``): ``index`` (k,) those hits among
+    the vertex's N, ``row_of`` (N,) each hit's row in ``lobe`` (-1 elsewhere), ``lobe`` the
+    k hits' lobe (their own diffuse colour per hit), ``wo``, ``n`` (k, 3) their view and
+    shading normal. Direct light takes f(wo, wi) per light sample; light that reaches them
+    through the irradiance estimates (cache, gather, photons, caustics) is taken as if it
+    came evenly: ``indirect_factor`` (N, 3) the lobe's directional albedo over rho (1
+    elsewhere) multiplies rho / pi x E."""
+
+    def __init__(self, table: MaterialTable, surface: "SurfaceParams", wo, n):
+        sigma = table.diffuse_sigma[surface.material]
+        count = len(sigma)
+        self.index = np.flatnonzero(sigma > 0)
+        self.row_of = np.full(count, -1)
+        self.row_of[self.index] = np.arange(len(self.index))
+        rho = np.asarray(surface.diffuse, np.float64)[self.index]
+        self.wo = np.asarray(wo, np.float64)[self.index]
+        self.n = np.asarray(n, np.float64)[self.index]
+        self.lobe = OrenNayar(rho, sigma[self.index])
+        self.indirect_factor = np.ones((count, 3))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            factor = self.lobe.albedo(self.wo, self.n) / rho
+        self.indirect_factor[self.index] = np.where(rho > 0, np.nan_to_num(factor), 1.0)
+
+    @property
+    def count(self) -> int:
+        return len(self.index)
 
 
 def layer_diffuse_factor(table: MaterialTable, material_ids, wo, n) -> np.ndarray:

@@ -68,7 +68,8 @@ import numpy as np
 
 from . import sampling
 from .camera import pixel_rays
-from .bsdf import layer_diffuse_factor, lobe_shares, reflection_albedo, sample_glossy
+from .bsdf import (RoughDiffuseHits, layer_diffuse_factor, lobe_shares, reflection_albedo,
+                   sample_glossy)
 from .direct import direct_terms, irradiance_from_terms
 from .passes import DIFFUSE, GLOSSY, LIGHT_PASS_NAMES, TRANSMISSION, LightSums
 from .lights import ray_visible, seen_light_radiance
@@ -468,6 +469,13 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
             if glossy.count == 0:
                 glossy = None
 
+        # Oren-Nayar diffuse (Principled Diffuse Roughness, Diffuse BSDF Roughness).
+        rough = None
+        if materials.has_oren_nayar:
+            rough = RoughDiffuseHits(materials, surface, -d, ns)
+            if rough.count == 0:
+                rough = None
+
         if light is not None and depth == 0:
             _first_hit_colors(light, rays, surface, glossy)
 
@@ -497,14 +505,21 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
                     usage[:, 1] += np.bincount(owner[~covered], minlength=len(usage))
                 e *= (spp / min(photon.lookups, spp))
                 _add_irradiance(e, ask, surface, glossy, thr, rays, spp, depth, indirect_sums,
-                                light, direct_light and not probe_lookup)
+                                light, direct_light and not probe_lookup, rough)
         if idx is not None and direct_light and context.caustics is not None:
             _shade_caustics(context, stats, idx, x, ns_smooth, surface, glossy, thr, rays, spp,
-                            depth, indirect_sums, light, probe_lookup)
+                            depth, indirect_sums, light, probe_lookup, rough)
         if idx is not None and direct_light:
-            _shade_direct(context, stats, rng, depth, idx, x, ns, ng, surface, thr, rays,
-                          pixel_of, direct_sums,
-                          None if glossy is None else glossy.diffuse_factor, light)
+            layer = None if glossy is None else glossy.diffuse_factor
+            lambert = idx
+            if rough is not None:
+                every = np.arange(len(x)) if isinstance(idx, slice) else idx
+                _shade_direct_rough(context, stats, rng, depth, every[rough.row_of[every] >= 0],
+                                    x, ns, ng, thr, rays, direct_sums, layer, light, rough)
+                lambert = every[rough.row_of[every] < 0]
+            if isinstance(lambert, slice) or len(lambert):
+                _shade_direct(context, stats, rng, depth, lambert, x, ns, ng, surface, thr,
+                              rays, pixel_of, direct_sums, layer, light)
         if glossy is not None:
             _shade_glossy_direct(context, stats, rng, glossy, x, ns, ng, thr, rays, spp,
                                  direct_sums, light, depth)
@@ -675,7 +690,7 @@ def edge_emission(context: CameraContext, camera, batch: int, pixels: np.ndarray
 
 
 def _shade_caustics(context, stats, idx, x, ns, surface, glossy, thr, rays, spp, depth,
-                    indirect_sums, light=None, probe_lookup=False):
+                    indirect_sums, light=None, probe_lookup=False, rough=None):
     """Caustics at the diffuse hits ``idx``: the caustic map's irradiance (light that reached
     them through specular surfaces, ``indirect.CausticEstimate``) x rho_d / pi (below a
     Principled layer: x its diffuse share), plus, at glossy hits where the path ends and no
@@ -690,17 +705,21 @@ def _shade_caustics(context, stats, idx, x, ns, surface, glossy, thr, rays, spp,
     if len(lit) == 0:
         return
     _add_irradiance(e[lit], ask[lit], surface, glossy, thr, rays, spp, depth, indirect_sums,
-                    light, not probe_lookup)
+                    light, not probe_lookup, rough)
 
 
 def _add_irradiance(e, at, surface, glossy, thr, rays, spp, depth, indirect_sums, light,
-                    glossy_part):
+                    glossy_part, rough=None):
     """Irradiance ``e`` (k, 3) at the diffuse hits ``at`` into the Indirect part: x rho_d / pi
     (below a Principled layer x its diffuse share) and, with ``glossy_part``, plus the glossy
     lobes' albedo / pi at hits where the path ends (their indirect light as if it came
     evenly: where no probe reads it, ``probe_lookup``); x the path's throughput after the
-    first hit; the light passes' kinds at the first hit (``passes.LightSums``)."""
+    first hit; the light passes' kinds at the first hit (``passes.LightSums``). ``rough``:
+    the vertex's Oren-Nayar hits (``bsdf.RoughDiffuseHits``), whose diffuse takes the light
+    as if it came evenly (x its directional albedo over rho)."""
     value = e * surface.diffuse_over_pi[at]
+    if rough is not None:
+        value *= rough.indirect_factor[at]
     if glossy is not None:
         value *= glossy.diffuse_factor[at]
         if light is not None and depth == 0:
@@ -721,6 +740,50 @@ def _add_irradiance(e, at, surface, glossy, thr, rays, spp, depth, indirect_sums
     add_to_pixels(indirect_sums, rays[at] // spp, value)
 
 
+def _counted_direct_terms(context, stats, rng, x, ns, ng, with_directions=False):
+    """``direct.direct_terms`` at points (x, ns, ng) with the render's lights and light
+    samples, its shadow-ray counters added to ``stats``."""
+    settings = context.settings
+    shadow_stats = {}
+    terms = direct_terms(x, ns, context.lights, context.accel, rng, settings.light_samples,
+                         stats=shadow_stats, offset_normals=ng, ray_log=context.ray_log,
+                         shadow_map=context.shadow_map, with_directions=with_directions)
+    stats["shadow_rays"] += shadow_stats.get("shadow_rays", 0)
+    for key in ("shadow_rays_saved", "shadow_lit", "shadow_umbra", "shadow_penumbra"):
+        stats[key] = stats.get(key, 0) + shadow_stats.get(key, 0)
+    stats["trace_seconds"] += shadow_stats.get("trace_seconds", 0.0)
+    return terms
+
+
+def _shade_direct_rough(context, stats, rng, depth, on, x, ns, ng, thr, rays, direct_sums,
+                        diffuse_factor, light, rough):
+    """Direct light at the Oren-Nayar hits ``on`` (indices among the vertex's hits): each
+    light sample weighted by the lobe's f(wo, wi) (``bsdf.RoughDiffuseHits``) instead of
+    rho / pi; below a Principled layer x its diffuse share; summed as ``_shade_direct``
+    sums (Diffuse Direct at the first hit)."""
+    if len(on) == 0:
+        return
+    terms = _counted_direct_terms(context, stats, rng, x[on], ns[on], ng[on],
+                                  with_directions=True)
+    rows = rough.row_of[on]
+    lobe, wo, n = rough.lobe.subset(rows), rough.wo[rows], rough.n[rows]
+    radiance = np.zeros((len(on), 3))
+    for target, scalar, rgb, directions, _hittable, _light in terms:
+        at = np.arange(len(on)) if target is None else target
+        f = lobe.subset(at).evaluate(wo[at], np.asarray(directions, np.float64), n[at])
+        value = f * (scalar[:, None] * np.asarray(rgb, np.float64).reshape(-1, 3))
+        for c in range(3):
+            radiance[:, c] += np.bincount(at, weights=value[:, c], minlength=len(on))
+    if diffuse_factor is not None:
+        radiance *= diffuse_factor[on]
+    if depth > 0:
+        radiance *= thr[on]
+    spp = context.settings.samples
+    add_to_pixels(direct_sums, rays[on] // spp, radiance)
+    if light is not None:
+        light.add(rays[on], radiance, direct=depth == 0, kind=DIFFUSE if depth == 0 else None)
+
+
 def _shade_direct(context, stats, rng, depth, idx, x, ns, ng, surface, thr, rays, pixel_of,
                   direct_sums, diffuse_factor=None, light=None):
     """Direct light at the diffuse hits ``idx``: rho_d / pi times the irradiance of
@@ -730,14 +793,7 @@ def _shade_direct(context, stats, rng, depth, idx, x, ns, ng, surface, thr, rays
     material) histogram and multiply by the materials' rho_d / pi once, instead of per hit."""
     settings, materials = context.settings, context.surfaces.materials
     spp = settings.samples
-    shadow_stats = {}
-    terms = direct_terms(x[idx], ns[idx], context.lights, context.accel, rng,
-                         settings.light_samples, stats=shadow_stats, offset_normals=ng[idx],
-                         ray_log=context.ray_log, shadow_map=context.shadow_map)
-    stats["shadow_rays"] += shadow_stats.get("shadow_rays", 0)
-    for key in ("shadow_rays_saved", "shadow_lit", "shadow_umbra", "shadow_penumbra"):
-        stats[key] = stats.get(key, 0) + shadow_stats.get(key, 0)
-    stats["trace_seconds"] += shadow_stats.get("trace_seconds", 0.0)
+    terms = _counted_direct_terms(context, stats, rng, x[idx], ns[idx], ng[idx])
     count = materials.count
     if depth == 0 and materials.constant_per_material and count <= MAX_HISTOGRAM_MATERIALS:
         mat_d = surface.material[idx]

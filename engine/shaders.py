@@ -29,7 +29,8 @@ principled     rho_d = Base Color (1 - Metallic)(1 - Transmission); rho_s = Base
                through the Fresnel; ``bsdf.MaterialTable.transport_*`` for photons and gather
                rays) and the transmission are rendered everywhere by their lobes
                (``bsdf.glossy_material``), layered as Cycles layers them
-diffuse        rho_d = Color (Roughness > 0, Oren-Nayar, is reported and rendered Lambertian)
+diffuse        rho_d = Color (Roughness > 0: Oren-Nayar at camera hits, ``bsdf.RoughDiffuseHits``;
+               Lambertian for photons and gather rays: reported)
 glossy         rho_s = Color, the roulette's share; rendered everywhere as GGX
 metallic       rho_s = Base Color (F82) or ((n-1)^2 + k^2) / ((n+1)^2 + k^2) (physical), the
                roulette's share; rendered everywhere as GGX with the F82-tint or conductor
@@ -164,6 +165,13 @@ def _per_hit(value) -> np.ndarray:
     return value[:, None] if value.ndim == 1 else value
 
 
+# What an Oren-Nayar diffuse gets (``bsdf.RoughDiffuseHits``), said once per material.
+OREN_NAYAR_NOTE = ("(Oren-Nayar, as Cycles) shapes direct light at camera hits; light reaching "
+                   "it through the irradiance cache, gather and photons is taken as if it came "
+                   "evenly (x the lobe's directional albedo), and photons and gather rays see "
+                   "a Lambertian diffuse of its colour")
+
+
 def _principled(c: Closure, note):
     p = c.params
     name = f"'{c.node}'"
@@ -185,8 +193,8 @@ def _principled(c: Closure, note):
         note(f"Subsurface Weight {_fmt(np.mean(p['subsurface_weight']))} of {name} is approximated: "
              "rendered as a diffuse lobe of the Base Color (no subsurface scattering)")
     if np.any(p["diffuse_roughness"] > 0) and metallic_max < 1 and transmission_max < 1:
-        note(f"Diffuse Roughness {_fmt(np.mean(p['diffuse_roughness']))} of {name} (Oren-Nayar) is "
-             "rendered as Lambertian")
+        note(f"Diffuse Roughness {_fmt(np.mean(p['diffuse_roughness']))} of {name} "
+             f"{OREN_NAYAR_NOTE}")
     if np.any(p["thin_film_thickness"] > 0.1) and transmission_max > 0:
         note(f"Thin Film of {name} is approximated: its transmission (glass) is rendered "
              "without the film (the reflection layers have it)")
@@ -212,8 +220,8 @@ def seed_reduction(closures) -> SeedMaterial:
         elif c.kind == "diffuse":
             d = p["color"]
             if np.any(p["roughness"] > 0):
-                note(f"Roughness {_fmt(np.mean(p['roughness']))} of Diffuse BSDF {name} (Oren-Nayar) is "
-                     "rendered as Lambertian")
+                note(f"Roughness {_fmt(np.mean(p['roughness']))} of Diffuse BSDF {name} "
+                     f"{OREN_NAYAR_NOTE}")
         elif c.kind == "emission":
             e = math.pi * p["radiance"]
         elif c.kind in ("glossy", "metallic"):
