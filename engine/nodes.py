@@ -14,7 +14,8 @@ Per-hit inputs (``inputs``, arrays over the N hits, float; all optional until a 
     object-space position (Texture Coordinate > Object); ``"normal"`` (N, 3) object-space
     shading normal; ``"generated"`` (N, 3) the Generated coordinate (object space mapped
     through the mesh's texture space, Blender's orco); ``"color:<name>"`` (N, 3) and
-    ``"alpha:<name>"`` (N,) vertex colours (``"color"``/``"alpha"`` for the active one).
+    ``"alpha:<name>"`` (N,) vertex colours (``"color"``/``"alpha"`` for the active one), or
+    ``"color:<name>"`` (N, 4) RGBA (what export hands over).
     World space (Geometry, Fresnel, Layer Weight, Normal Map, Bump): ``"position_world"``
     (N, 3) [m]; ``"normal_world"`` (N, 3) the unit shading normal, already turned to the side
     the ray came from (Cycles' sd->N); ``"true_normal_world"`` (N, 3) the geometric normal, so
@@ -1080,7 +1081,10 @@ def _vertex_color(ev, node):
     name = node.props.get("layer_name", "")
     ck = f"color:{name}" if name else "color"
     ak = f"alpha:{name}" if name else "alpha"
-    out = {"Color": ev.hit(ck, node)}
+    color = ev.hit(ck, node)
+    if color.shape[1] == 4:       # RGBA, as export stores colour attributes
+        return {"Color": color[:, :3], "Alpha": color[:, 3]}
+    out = {"Color": color}
     out["Alpha"] = (np.asarray(ev.inputs[ak], float) if ak in ev.inputs else np.ones(ev.n))
     return out
 

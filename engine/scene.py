@@ -24,7 +24,8 @@ Triangles are stored as a float32 array ``(T, 3, 3)`` (triangle, corner, xyz) wi
 shading normals of the same shape, a material id and an object id per triangle. Surfaces are
 two-sided; the geometric normal is turned towards the incoming ray at shading time. Textured
 materials read per-corner coordinates (``corner_attributes``: UV maps, object-space position
-and normal, generated coordinates; ``engine/textures.py``) through ``Material.graph``.
+and normal, generated coordinates, colour and geometry attributes; ``engine/textures.py``)
+through ``Material.graph``.
 
 :func:`Scene.validate` checks shapes, dtypes and values and drops triangles that cannot be
 traced (NaN or infinite corners, zero area), counting them in ``warnings``.
@@ -407,7 +408,8 @@ class Scene:
     warnings: list[str] = field(default_factory=list)
     stats: dict = field(default_factory=dict)
     # Per-corner coordinates that textured materials read, name -> (T, 3, k) float32
-    # ("uv", "uv:<name>", "position", "normal", "generated"; for shading normals also
+    # ("uv", "uv:<name>", "position", "normal", "generated"; "color" / "color:<name>" and
+    # "attr:<name>" (T, 3, 4) RGBA colour and geometry attributes; for shading normals also
     # "tangent" / "tangent:<name>" (T, 3, 4) and "normal_matrix" (T, 3, 3), one matrix per
     # triangle, not per corner; ``engine/textures.py``).
     corner_attributes: dict = field(default_factory=dict)

@@ -10,7 +10,8 @@ material's node graph (``scene.Material.graph``, an ``engine.nodes.Graph``) and 
 scene the per-corner coordinates the graphs read (``Scene.corner_attributes``: ``"uv"`` the
 active render UV map (T, 3, 2), ``"uv:<name>"`` each UV map by name, ``"position"`` and
 ``"normal"`` object space (T, 3, 3), ``"generated"`` the mesh's texture-space coordinate
-(T, 3, 3); float32). At a hit these are interpolated with the hit's barycentrics (corner
+(T, 3, 3), ``"color"`` / ``"color:<name>"`` and ``"attr:<name>"`` colour and geometry
+attributes as RGBA (T, 3, 4); float32). At a hit these are interpolated with the hit's barycentrics (corner
 weights 1 - u - v, u, v, as ``surfaces.SceneSurfaces.normals`` uses them) and handed to
 ``nodes.evaluate``.
 

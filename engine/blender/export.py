@@ -44,7 +44,8 @@ animation already applied by Blender) and turns it into the renderer's inert sce
   per-hit (``Closure.textures``, the material's ``graph``; ``engine/textures.py`` says what
   follows the texture at each hit and what takes its mean, and each approximation is
   reported); the per-corner coordinates the graphs read (UV maps, object-space position and
-  normal, generated coordinates) go onto ``Scene.corner_attributes``. Any other link is
+  normal, generated coordinates, colour attributes for Color Attribute and geometry attributes
+  for Attribute nodes: ``_read_attributes``) go onto ``Scene.corner_attributes``. Any other link is
   reported once per material and socket, naming the node it cannot evaluate, and the socket's
   default value is used. rho_d and rho_s are clipped to [0, 1] and scaled down per channel where
   rho_d + rho_s > 1, with a warning. Emissive meshes need no light objects: the core builds
@@ -200,6 +201,10 @@ class _MeshData:
     # UV map name -> (L, 4) float32 MikkTSpace tangent and bitangent sign per corner (read only
     # for meshes whose materials have a shading normal: ``_read_tangents``)
     tangents: dict | None = None
+    # ``"color:<name>"`` / ``"color"`` / ``"attr:<name>"`` -> (T, 3, 4) float32 per triangle
+    # corner: the colour and geometry attributes the mesh's materials read
+    # (``_read_attributes``; read once per key)
+    attributes: dict = dataclasses.field(default_factory=dict)
 
     @property
     def count(self) -> int:
@@ -327,6 +332,100 @@ def _gradient_tangents(data: _MeshData, uv: np.ndarray, n_corner: int) -> np.nda
     return out
 
 
+# Attribute data types -> (the ``foreach_get`` property, its width); others are not read.
+_ATTRIBUTE_TYPES = {"FLOAT": ("value", 1), "INT": ("value", 1), "BOOLEAN": ("value", 1),
+                    "INT8": ("value", 1), "FLOAT_VECTOR": ("vector", 3),
+                    "FLOAT2": ("vector", 2), "FLOAT_COLOR": ("color", 4),
+                    "BYTE_COLOR": ("color", 4)}
+
+
+def _default_color_name(mesh) -> str:
+    """The colour attribute Cycles reads for a Color Attribute node with no name (the mesh's
+    default, i.e. render, colour attribute), or ""."""
+    attrs = getattr(mesh, "color_attributes", None)
+    if attrs is None:
+        return ""
+    name = getattr(attrs, "default_color_name", "") or ""
+    if not name:
+        index = getattr(attrs, "render_color_index", -1)
+        if 0 <= index < len(attrs):
+            name = attrs[index].name
+    return name
+
+
+def _read_attributes(mesh, data: _MeshData, keys, warn, owner: str) -> None:
+    """Fill ``data.attributes`` for the attribute keys ``keys`` (``"color"``,
+    ``"color:<name>"``, ``"attr:<name>"``) not yet read: (T, 3, 4) float32 per triangle corner,
+    as Cycles interpolates them. Colours are Blender's scene-linear values (a byte colour's
+    ``color``, as Cycles linearises it before interpolating); numbers fill (f, f, f, 1),
+    vectors (x, y, z, 1), 2-D vectors (x, y, 0, 1) (with a warning: Cycles' Fac of such an
+    attribute is x, the evaluator gives the mean of the three components). Point attributes
+    are taken at each corner's vertex, face attributes on the whole triangle. A mesh that
+    lacks the attribute gets zeros (alpha 0 too), as Cycles reads a missing attribute; an
+    edge-domain or unsupported type is reported and read as missing. UV maps named by an
+    Attribute node come from ``data.uv_maps``."""
+    n_tri = data.count
+    for key in keys:
+        if key in data.attributes or not key.startswith(("color", "attr:")):
+            continue
+        out = np.zeros((n_tri, 3, 4), np.float32)
+        data.attributes[key] = out
+        name = key.split(":", 1)[1] if ":" in key else _default_color_name(mesh)
+        if not name:
+            continue
+        if key.startswith("attr:") and name in data.uv_maps:
+            uv = data.uv_maps[name][data.corner_loops].reshape(n_tri, 3, 2)
+            out[..., :2], out[..., 3] = uv, 1.0
+            warn(f"{owner}: an Attribute node reads the 2-D attribute '{name}'; its Fac is "
+                 "the mean of (x, y, 0) here, Cycles gives x")
+            continue
+        attr = mesh.attributes.get(name)
+        if attr is None:
+            continue
+        kind = _ATTRIBUTE_TYPES.get(attr.data_type)
+        sizes = {"POINT": len(mesh.vertices), "CORNER": len(mesh.loops),
+                 "FACE": len(mesh.polygons)}
+        if kind is None or attr.domain not in sizes:
+            warn(f"{owner}: attribute '{name}' ({attr.data_type.lower()} on the "
+                 f"{attr.domain.lower()} domain) cannot be read by shader nodes; it reads 0")
+            continue
+        prop, width = kind
+        size = sizes[attr.domain]
+        values = np.empty(size * width, np.float64 if prop == "value" else np.float32)
+        attr.data.foreach_get(prop, values)
+        values = values.reshape(size, width).astype(np.float32)
+        if attr.domain == "POINT":
+            per_corner = values[data.tri_verts]
+        elif attr.domain == "CORNER":
+            per_corner = values[data.corner_loops]
+        else:
+            per_corner = np.repeat(values[_triangle_faces(mesh, n_tri)], 3, axis=0)
+        per_corner = per_corner.reshape(n_tri, 3, width)
+        if width == 1:
+            out[..., :3], out[..., 3] = per_corner, 1.0
+        elif width == 4:
+            out[:] = per_corner
+        else:
+            out[..., :width], out[..., 3] = per_corner, 1.0
+            if width == 2:
+                warn(f"{owner}: an Attribute node reads the 2-D attribute '{name}'; its Fac "
+                     "is the mean of (x, y, 0) here, Cycles gives x")
+        if not np.all(np.isfinite(out)):
+            warn(f"{owner}: attribute '{name}' holds NaN or infinite values; they read 0")
+            np.nan_to_num(out, copy=False, nan=0.0, posinf=0.0, neginf=0.0)
+
+
+def _triangle_faces(mesh, n_tri: int) -> np.ndarray:
+    """(T,) int32: the face each loop triangle belongs to."""
+    faces = np.empty(n_tri, np.int32)
+    tri_face = getattr(mesh, "loop_triangle_polygons", None)
+    if tri_face is not None and len(tri_face) == n_tri:
+        tri_face.foreach_get("value", faces)
+    else:
+        mesh.loop_triangles.foreach_get("polygon_index", faces)
+    return faces
+
+
 def _read_uv_maps(mesh, n_corner: int):
     """({name: (L, 2) float32}, the active render map's name) of ``mesh``'s UV maps."""
     maps, active = {}, ""
@@ -367,6 +466,9 @@ def _corner_attribute(data: _MeshData, key: str) -> np.ndarray:
         size = np.where(np.abs(size) > 1e-12, size, 1.0)
         generated = (co - (location - size)) / (2.0 * size)
         return generated[data.tri_verts].astype(np.float32).reshape(n_tri, 3, 3)
+    if key.startswith(("color", "attr:")):
+        attribute = data.attributes.get(key)
+        return attribute if attribute is not None else np.zeros((n_tri, 3, 4), np.float32)
     if key.startswith("tangent"):
         name = data.active_uv if key == "tangent" else key[8:]
         tangent = (data.tangents or {}).get(name)
@@ -445,7 +547,7 @@ _PARAM_SOCKETS = {
     "translucent": {"color": [("Color",)]},
     "sheen": {"color": [("Color",)], "roughness": [("Roughness",)]},
 }
-_COORDINATE_KEYS = ("uv", "position", "normal", "generated")
+_COORDINATE_KEYS = ("uv", "position", "normal", "generated", "color", "attr")
 # What a shading normal's nodes (Normal Map) may read besides those: the per-corner MikkTSpace
 # tangents, the per-triangle normal matrix, and the camera hit's own world-space values
 # (``nodes`` module docstring), which the integrator hands over (``bsdf.MaterialTable``).
@@ -483,6 +585,8 @@ class _CoordinateRecorder(dict):
             return np.eye(3)[None]
         if key.startswith("tangent"):
             return np.array([[1.0, 0.0, 0.0, 1.0]])
+        if key.startswith(("color", "attr")):
+            return np.zeros((1, 4))
         return np.zeros((1, 2) if key.startswith("uv") else (1, 3))
 
     def get(self, key, default=None):
@@ -808,17 +912,24 @@ def _coordinates_read(materials) -> set:
     ``materials`` read, by a trial evaluation of each at one point."""
     keys: set = set()
     for material in materials:
-        if getattr(material, "shading_normal", None) is not None:
-            recorder = _CoordinateRecorder(shading_normal=True)
-            nodes.evaluate(material.graph, tuple(material.shading_normal), recorder, n=1)
-            keys |= recorder.asked
-        for closure in material.closures:
-            for factors in closure.textures.values():
-                for socket, _constant in factors:
-                    if socket is not None:
-                        recorder = _CoordinateRecorder()
-                        nodes.evaluate(material.graph, tuple(socket), recorder, n=1)
-                        keys |= recorder.asked
+        keys |= _material_coordinates(material)
+    return keys
+
+
+def _material_coordinates(material) -> set:
+    """The per-corner coordinates one material's node-driven inputs and normal read."""
+    keys: set = set()
+    if getattr(material, "shading_normal", None) is not None:
+        recorder = _CoordinateRecorder(shading_normal=True)
+        nodes.evaluate(material.graph, tuple(material.shading_normal), recorder, n=1)
+        keys |= recorder.asked
+    for closure in material.closures:
+        for factors in closure.textures.values():
+            for socket, _constant in factors:
+                if socket is not None:
+                    recorder = _CoordinateRecorder()
+                    nodes.evaluate(material.graph, tuple(socket), recorder, n=1)
+                    keys |= recorder.asked
     return keys
 
 
@@ -1214,11 +1325,22 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
         group.matrices.append(matrix)
         group.names.append(name)
 
+    material_keys: dict = {}     # material id -> the corner attributes it reads
+
     def read_tangents(obj, mesh, data) -> None:
-        """The mesh's tangents, once, when a material of ``obj`` has a shading normal."""
-        if data is None or data.tangents is not None or not data.uv_maps:
+        """The mesh's tangents, once, when a material of ``obj`` has a shading normal; the
+        colour and geometry attributes its materials read."""
+        if data is None:
             return
         slots = [material_id(s.material) for s in obj.material_slots]
+        keys: set = set()
+        for i in slots:
+            if i not in material_keys:
+                material_keys[i] = _material_coordinates(materials[i])
+            keys |= material_keys[i]
+        _read_attributes(mesh, data, sorted(keys), warn, f"Object '{obj.name}'")
+        if data.tangents is not None or not data.uv_maps:
+            return
         if any(materials[i].shading_normal is not None for i in slots):
             data.tangents = _read_tangents(mesh, data, warn, f"Object '{obj.name}'")
 
@@ -1341,7 +1463,7 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
             object_ids[start:end] = np.repeat(group.object_ids[c0:c0 + step], n_tri)
             start = end
 
-    width = {"uv": 2, "tangent": 4}
+    width = {"uv": 2, "tangent": 4, "color": 4, "attr": 4}
     corner_attributes = {key: np.zeros((total, 3, width.get(key.split(":")[0], 3)), np.float32)
                          for key in sorted(_coordinates_read(materials))}
     start = 0
