@@ -64,7 +64,8 @@ Nodes (Blender 5.2 LTS; formulas follow Cycles' SVM kernel, ``intern/cycles/kern
     cardinal, B-spline; RGB, HSV and HSL blending; through Cycles' 257-entry table), Checker,
     Gradient (all 7 types), Texture Coordinate (Generated, Normal, UV, Object), UV Map, Color
     Attribute, Mapping (point, texture, vector, normal), Image Texture (flat projection; closest,
-    linear, cubic B-spline, Smart as cubic; repeat, extend, clip, mirror; alpha straight);
+    linear, cubic B-spline, Smart as cubic; repeat, extend, clip, mirror; alpha straight; UDIM
+    images, :class:`TiledImage`, tile by tile as Cycles maps them);
     Noise Texture (1D-4D; fBM, multifractal, hybrid and ridged multifractal, hetero terrain;
     fractional detail, distortion, normalize; Fac and Color), Voronoi Texture (1D-4D; F1, F2,
     smooth F1, distance to edge, n-sphere radius; Euclidean, Manhattan, Chebychev, Minkowski;
@@ -99,11 +100,11 @@ import numpy as np
 
 from . import procedural
 
-__all__ = ["Node", "Graph", "Image", "UnsupportedNode", "MissingInput", "evaluate",
+__all__ = ["Node", "Graph", "Image", "TiledImage", "UnsupportedNode", "MissingInput", "evaluate",
            "graph_to_dict", "graph_from_dict", "SUPPORTED", "math_op", "vector_math_op",
            "mix_color", "rgb_to_hsv", "hsv_to_rgb", "rgb_to_hsl", "hsl_to_rgb",
-           "srgb_to_linear", "ramp_table", "image_lookup", "stored_pixels", "Evaluator",
-           "image_bytes"]
+           "srgb_to_linear", "ramp_table", "image_lookup", "udim_lookup", "MISSING_RGBA",
+           "stored_pixels", "Evaluator", "image_bytes"]
 
 LUMA = np.array([0.21263901, 0.71516867, 0.07219232])  # Blender 5.2 config luminance (measured)
 FLT_EPSILON = 1.1920929e-07
@@ -182,6 +183,19 @@ class Image:
 
 
 @dataclass
+class TiledImage:
+    """A UDIM image: ``tiles`` maps a tile number to its :class:`Image`; tile
+    1001 + 10 v + u covers UV [u, u + 1) x [v, v + 1), u in 0..9 (Blender's numbering).
+    ``nbytes``: the texels of all tiles."""
+    tiles: dict
+    encoding: str = "linear"
+
+    @property
+    def nbytes(self) -> int:
+        return int(sum(tile.nbytes for tile in self.tiles.values()))
+
+
+@dataclass
 class Node:
     """One node: Blender's bl_idname, its name, properties, inputs {identifier: (kind,
     default)} and outputs {identifier: kind}; kinds are Blender's socket types."""
@@ -211,14 +225,16 @@ def graph_to_dict(graph: Graph) -> dict:
 
 
 def graph_from_dict(d: dict, pixels: dict | None = None) -> Graph:
-    """Inverse of :func:`graph_to_dict`; ``pixels`` maps image names to (H, W, 4) arrays (an
-    image without pixels is left out: its Image Texture nodes give the missing-image colour)."""
+    """Inverse of :func:`graph_to_dict`; ``pixels`` maps image names to (H, W, 4) arrays, or
+    for a UDIM image to {tile number: (H, W, 4)} (an image without pixels is left out: its
+    Image Texture nodes give the missing-image colour)."""
     nodes = {n["name"]: Node(n["type"], n["name"], dict(n["props"]),
                              {k: (kind, v) for k, (kind, v) in n["inputs"].items()},
                              dict(n["outputs"])) for n in d["nodes"]}
     links = {(a, b): (c, e) for a, b, c, e in d["links"]}
     pixels = pixels or {}
-    images = {k: Image(pixels[k], enc)
+    images = {k: (TiledImage({int(n): Image(a, enc) for n, a in pixels[k].items()}, enc)
+                  if isinstance(pixels[k], dict) else Image(pixels[k], enc))
               for k, enc in d.get("images", {}).items() if k in pixels}
     return Graph(nodes, links, images)
 
@@ -639,10 +655,38 @@ def _wrap_index(i, n, extension):
     return np.clip(i, 0, n - 1), inside
 
 
+# Cycles' missing-image colour (TEX_IMAGE_MISSING_R/G/B/A: magenta, alpha 1)
+MISSING_RGBA = (1.0, 0.0, 1.0, 1.0)
+
+
+def udim_lookup(image: TiledImage, x, y, interpolation="Linear", extension="REPEAT"):
+    """RGBA (N, 4) of a UDIM image at UV (x, y), as Cycles maps UDIMs: the tile is
+    1001 + 10 trunc(y) + trunc(x) (truncated towards zero, in float32, so -0.5 falls in tile
+    1001), UVs are taken relative to it and the extension applies inside the tile; points
+    with trunc(x) < 0, trunc(y) < 0, trunc(x) > 9 or in a tile the image lacks get the
+    missing-image colour."""
+    x, y = np.asarray(x, np.float32), np.asarray(y, np.float32)
+    out = np.broadcast_to(np.asarray(MISSING_RGBA, np.float64), (x.shape[0], 4)).copy()
+    finite = np.isfinite(x) & np.isfinite(y)
+    tx = np.trunc(np.where(finite, x, -1.0)).clip(-1, 1e6).astype(np.int64)
+    ty = np.trunc(np.where(finite, y, -1.0)).clip(-1, 1e6).astype(np.int64)
+    valid = finite & (tx >= 0) & (ty >= 0) & (tx < 10)
+    number = 1001 + 10 * ty + tx
+    for tile_number, tile in image.tiles.items():
+        hit = np.flatnonzero(valid & (number == tile_number))
+        if hit.size:
+            out[hit] = image_lookup(tile, x[hit] - tx[hit].astype(np.float32),
+                                    y[hit] - ty[hit].astype(np.float32), interpolation,
+                                    extension)
+    return out
+
+
 def image_lookup(image: Image, x, y, interpolation="Linear", extension="REPEAT"):
     """RGBA (N, 4) of ``image`` at UV (x, y), as Cycles' image look-up and svm_image_texture
     give it (interpolating the stored encoding in float32, bytes as k / 255, then sRGB ->
-    linear for "srgb" images)."""
+    linear for "srgb" images); a :class:`TiledImage` by :func:`udim_lookup`."""
+    if isinstance(image, TiledImage):
+        return udim_lookup(image, x, y, interpolation, extension)
     px = image.pixels
     h, w = px.shape[:2]
     flat = px.reshape(h * w, px.shape[-1])
@@ -1111,8 +1155,7 @@ def _tex_image(ev, node):
     p = node.props
     name = p.get("image")
     if name is None or name not in ev.g.images:
-        # Cycles' missing-image colour (TEX_IMAGE_MISSING_R/G/B/A: magenta, alpha 1)
-        return {"Color": np.broadcast_to([1.0, 0.0, 1.0], (ev.n, 3)).copy(),
+        return {"Color": np.broadcast_to(MISSING_RGBA[:3], (ev.n, 3)).copy(),
                 "Alpha": np.ones(ev.n)}
     if p.get("projection", "FLAT") != "FLAT":
         raise UnsupportedNode(node.type, node.name, f"projection {p['projection']}")

@@ -19,13 +19,19 @@ and the linear spaces as "linear"; any other colour space on a byte image is rep
 ``warn`` and read as sRGB. An 8-bit image is then held as its bytes (uint8, 4 B a texel), a
 float image as float16 where that is lossless and float32 otherwise (``nodes.stored_pixels``);
 the float32 read is let go once the image is made. Packed and file images read the same way
-(``pixels`` loads them); tiled (UDIM) images and sequences are reported and left out (the
-Image Texture node then gives Cycles' missing-image magenta).
+(``pixels`` loads them). A UDIM (tiled) image becomes a ``nodes.TiledImage``: each tile is
+read from its packed data or from its file (the ``<UDIM>`` / ``<UVTILE>`` token replaced),
+through a temporary image of the same colour space, since ``Image.pixels`` gives only the
+first tile. Sequences and movies are reported and left out (the Image Texture node then gives
+Cycles' missing-image magenta).
 
 Parameters: ``warn`` (callable taking one message; default: ignore), ``images`` (a dict cache
 name -> ``nodes.Image``, shared between materials so each image is read once).
 """
 from __future__ import annotations
+
+import os
+import tempfile
 
 import numpy as np
 
@@ -74,8 +80,11 @@ def _value(v):
 
 
 def image_pixels(image, warn=lambda m: None):
-    """``nodes.Image`` for a bpy image, or None (reported) when it cannot be read."""
-    if image.source in ("TILED", "SEQUENCE", "MOVIE"):
+    """``nodes.Image`` for a bpy image (``nodes.TiledImage`` for a UDIM image), or None
+    (reported) when it cannot be read."""
+    if image.source == "TILED":
+        return _tiled_image(image, warn)
+    if image.source in ("SEQUENCE", "MOVIE"):
         warn(f"image '{image.name}': {image.source.lower()} images are not supported yet")
         return None
     w, h = image.size
@@ -131,6 +140,66 @@ def curve_table(mapping, n_curves: int) -> dict:
         table = [[float(ev(c, float(x))) for c in curves] for x in xs]
     return {"table": table, "min_x": lo, "max_x": hi,
             "extrapolate": mapping.extend == "EXTRAPOLATED"}
+
+
+def _tile_path(path: str, number: int) -> str:
+    """A UDIM tile's file: Blender's ``<UDIM>`` (1001 ...) or ``<UVTILE>`` (u1_v1 ...) token
+    replaced by the tile's number."""
+    u, v = (number - 1001) % 10, (number - 1001) // 10
+    return path.replace("<UDIM>", str(number)).replace("<UVTILE>", f"u{u + 1}_v{v + 1}")
+
+
+def _tiled_image(image, warn):
+    """``nodes.TiledImage`` of a UDIM image: each tile read from its packed data or its file
+    (Blender's ``Image.pixels`` gives the first tile only), loaded as a temporary image with
+    the UDIM image's colour space and alpha mode and read as any image; a tile that cannot be
+    read is reported and left out (Cycles' missing-image colour there)."""
+    import bpy
+
+    packed = {int(getattr(p, "tile_number", 0)): p for p in getattr(image, "packed_files", ())}
+    path = bpy.path.abspath(image.filepath_raw or image.filepath, library=image.library)
+    tiles = {}
+    for tile in image.tiles:
+        number = int(tile.number)
+        source, temporary = None, None
+        if number in packed and packed[number].packed_file is not None:
+            suffix = os.path.splitext(packed[number].filepath)[1] or ".png"
+            handle, temporary = tempfile.mkstemp(suffix=suffix)
+            with os.fdopen(handle, "wb") as out:
+                out.write(packed[number].packed_file.data)
+            source = temporary
+        elif path:
+            candidate = _tile_path(path, number)
+            if os.path.isfile(candidate):
+                source = candidate
+        if source is None:
+            warn(f"image '{image.name}': UDIM tile {number} has no file or packed data "
+                 "(a generated tile that was never saved?); it reads as missing (magenta)")
+            continue
+        loaded = None
+        try:
+            loaded = bpy.data.images.load(source, check_existing=False)
+            loaded.colorspace_settings.name = image.colorspace_settings.name
+            loaded.alpha_mode = image.alpha_mode
+            tiles[number] = image_pixels(loaded, lambda m, n=number: warn(
+                m.replace(f"image '{loaded.name}'", f"image '{image.name}' tile {n}")))
+        except (RuntimeError, TypeError, ValueError) as error:
+            warn(f"image '{image.name}': UDIM tile {number} cannot be read ({error}); it "
+                 "reads as missing (magenta)")
+        finally:
+            if loaded is not None:
+                bpy.data.images.remove(loaded)
+            if temporary is not None:
+                try:
+                    os.remove(temporary)
+                except OSError:
+                    pass
+    tiles = {n: t for n, t in tiles.items() if t is not None}
+    if not tiles:
+        warn(f"image '{image.name}': no UDIM tile could be read")
+        return None
+    encodings = {t.encoding for t in tiles.values()}
+    return N.TiledImage(tiles, encodings.pop() if len(encodings) == 1 else "linear")
 
 
 def export_graph(tree, warn=lambda m: None, images: dict | None = None) -> N.Graph:
