@@ -36,6 +36,11 @@ weights 1 - u - v, u, v, as ``surfaces.SceneSurfaces.normals`` uses them) and ha
 ``lookups_per_hit(material)`` -> (reflectance, emission) image look-ups per evaluation, for
     the cost estimate (``engine/estimate.py``).
 
+A Mix Shader's node-driven Fac is a per-hit factor on the weights of the closures below it
+(``Closure.textures[WEIGHT]``: Fac for the second shader, 1 - Fac, ``COMPLEMENT``, for the
+first; :func:`weight_at`); export's static material takes the socket's own value
+(:func:`default_weight`).
+
 What follows the texture at each hit, and what takes its mean
     The diffuse reflectance (camera shading, the photons' stored power and roulette, gather
     rays, the cache's records: all read ``bsdf.SurfaceParams.diffuse`` at their own hit), the
@@ -58,6 +63,7 @@ from . import nodes
 from .shaders import CLOSURE_KINDS, seed_reduction
 
 __all__ = ["MaterialTextures", "HitInputs", "approximations", "interpolate_corners",
+           "WEIGHT", "COMPLEMENT", "WEIGHT_EXACT_KINDS", "default_weight", "weight_at",
            "lookups_per_hit", "EMISSION_PARAMS", "MEAN_SAMPLES",
            "PARAM_RANGES", "EXACT_PARAMS", "PER_TRIANGLE"]
 
@@ -93,6 +99,15 @@ def interpolate_corners(corner: np.ndarray, prim, bu, bv) -> np.ndarray:
     v = np.asarray(bv, np.float64)[:, None]
     return c[:, 0] * (1.0 - u - v) + c[:, 1] * u + c[:, 2] * v
 
+
+# ``Closure.textures`` key of a closure's per-hit weight: the node-driven Facs of the Mix
+# Shaders above it (factors ``((node, output), constant)``, or ``((node, output, COMPLEMENT),
+# constant)`` for 1 - Fac; ``constant`` the socket's own value, export's static guess).
+WEIGHT = "weight"
+COMPLEMENT = "complement"
+# Closure kinds whose per-hit weight is rendered exactly (their whole contribution is the
+# seed's rho_d or M at the hit); the others' lobes take the weight's mean.
+WEIGHT_EXACT_KINDS = ("diffuse", "emission", "translucent")
 
 # Per-triangle attributes among ``Scene.corner_attributes``: taken, not interpolated.
 PER_TRIANGLE = ("normal_matrix",)
@@ -181,6 +196,25 @@ def param_at(evaluator: "nodes.Evaluator", graph, kind: str, param: str, factors
     return _clip(param, np.array(value, np.float64))
 
 
+def default_weight(closure) -> float:
+    """The product of a closure's node-driven weight factors at their sockets' own values
+    (what export's static material uses); 1 without any."""
+    return float(np.prod([constant for _socket, constant in closure.textures.get(WEIGHT, ())]))
+
+
+def weight_at(evaluator: "nodes.Evaluator", graph, factors) -> np.ndarray:
+    """(N,) the per-hit factor on a closure's weight: the product of its Mix Shader Facs
+    (``WEIGHT`` factors), each node output taken as a number (a colour by its luminance),
+    clamped to [0, 1] as Cycles clamps a Mix Shader's Fac, and its complement 1 - Fac for
+    the Mix's first shader (``COMPLEMENT``)."""
+    out = np.ones(evaluator.n)
+    for socket, _constant in factors:
+        fac = _as_param(evaluator.value(tuple(socket[:2])), 0.0, graph, socket[:2])
+        fac = np.clip(np.broadcast_to(fac, (evaluator.n,)), 0.0, 1.0)
+        out = out * (1.0 - fac if socket[2:] == (COMPLEMENT,) else fac)
+    return out
+
+
 def _upstream(graph, node: str) -> set:
     """Names of ``node`` and every node linked into it, directly or not."""
     into = {}
@@ -208,11 +242,13 @@ def lookups_per_hit(material) -> tuple[int, int]:
     driven = {"reflectance": False, "emission": False}
     for c in material.closures:
         for param, factors in c.textures.items():
-            part = "emission" if (c.kind, param) in EMISSION_PARAMS else "reflectance"
+            kinds = (("reflectance", "emission") if param == WEIGHT else
+                     ("emission",) if (c.kind, param) in EMISSION_PARAMS else ("reflectance",))
             for socket, _constant in factors:
                 if socket is not None:
-                    driven[part] = True
-                    parts[part] |= _upstream(graph, socket[0])
+                    for part in kinds:
+                        driven[part] = True
+                        parts[part] |= _upstream(graph, socket[0])
     out = []
     for part in ("reflectance", "emission"):
         images = sum(1 for name in parts[part] if name in graph.nodes
@@ -227,8 +263,12 @@ def approximations(closures) -> list[str]:
     input): inputs of glossy and glass lobes take their mean over the surface."""
     out = []
     for c in closures:
+        if WEIGHT in c.textures and c.kind not in WEIGHT_EXACT_KINDS:
+            out.append(f"'{c.node}' is mixed in by a node-driven Mix Shader Fac; its "
+                       f"{c.kind} lobes take the mixed weight's mean over the surface (per-hit "
+                       "weights reach the diffuse, the emission and the roulette only)")
         for param in c.textures:
-            if (c.kind, param) in EXACT_PARAMS:
+            if param == WEIGHT or (c.kind, param) in EXACT_PARAMS:
                 continue
             if c.kind == "principled" and param == "base_color":
                 continue
@@ -285,16 +325,18 @@ class MaterialTextures:
         evaluator = nodes.Evaluator(graph, self.inputs(prim, bu, bv), len(prim))
         out = []
         for c in self.scene.materials[material_id].closures:
-            wanted = [param for param in c.textures
-                      if part == "all" or ((c.kind, param) in EMISSION_PARAMS)
-                      == (part == "emission")]
-            if not wanted:
+            wanted = [param for param in c.textures if param != WEIGHT and (
+                part == "all" or ((c.kind, param) in EMISSION_PARAMS) == (part == "emission"))]
+            if not wanted and WEIGHT not in c.textures:
                 out.append(c)
                 continue
             params = dict(c.params)
             for param in wanted:
                 params[param] = param_at(evaluator, graph, c.kind, param, c.textures[param])
-            out.append(c.at_hits(params))
+            hit = c.at_hits(params)
+            if WEIGHT in c.textures:
+                hit.weight = c.weight * weight_at(evaluator, graph, c.textures[WEIGHT])[:, None]
+            out.append(hit)
         return out
 
     def reduction(self, material_id: int, prim, bu, bv):
@@ -331,7 +373,8 @@ class MaterialTextures:
         "emission") reads."""
         out = np.zeros(len(self.textured), bool)
         for m in np.flatnonzero(self.textured):
-            out[m] = any(((c.kind, param) in EMISSION_PARAMS) == (part == "emission")
+            out[m] = any(param == WEIGHT or ((c.kind, param) in EMISSION_PARAMS)
+                         == (part == "emission")
                          for c in self.scene.materials[m].closures for param in c.textures)
         return out
 
@@ -361,10 +404,14 @@ class MaterialTextures:
                 continue
             params = dict(original.params)
             for param in original.textures:
+                if param == WEIGHT:
+                    continue
                 value = np.mean(c.params[param], axis=0)
                 params[param] = tuple(float(x) for x in value) if np.ndim(value) else \
                     float(value)
             mean = original.scaled(1.0)
+            if WEIGHT in original.textures:        # the mixed weight's mean over the surface
+                mean.weight = np.mean(np.broadcast_to(c.weight, (len(prim), 3)), axis=0)
             mean.params = {k: (np.asarray(v, np.float64) if isinstance(v, tuple) else v)
                            for k, v in params.items()}
             means.append(mean)

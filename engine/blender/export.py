@@ -34,7 +34,8 @@ animation already applied by Blender) and turns it into the renderer's inert sce
   - Diffuse BSDF: rho_d = Color. Emission: M = pi x Color x Strength, rho_d = 0.
   - Glossy BSDF: rho_s = Color. Metallic BSDF: rho_s = Base Color (F82 mode) or the
     normal-incidence Fresnel reflectance ((n-1)^2 + k^2) / ((n+1)^2 + k^2) per channel.
-  - Mix Shader: (1 - Fac) A + Fac B; Add Shader: A + B.
+  - Mix Shader: (1 - Fac) A + Fac B; Add Shader: A + B. A Fac driven by nodes the evaluator
+    supports becomes a per-hit factor on the weights below it (``textures.WEIGHT``).
   - Glass / Refraction: only the reflected Fresnel part at normal incidence, as a mirror.
   - Translucent, Subsurface, Sheen, Toon, hair and other shaders with a colour: treated as a
     diffuse of that colour. Transparent and Holdout: black. Anything else: default grey.
@@ -853,6 +854,14 @@ class _NodeReader:
             if t == "ADD_SHADER":
                 return a + b
             fac = float(np.clip(self.scalar(node, "Fac", "Factor", default=0.5), 0, 1))
+            driven = next((self.driven.pop(k) for k in ((node.name, ("Fac", "Factor")),)
+                           if k in self.driven), None)
+            if driven is not None:
+                # A Fac driven by nodes the evaluator supports: each closure's weight takes
+                # (1 - Fac) or Fac per hit (``textures.WEIGHT``; Cycles clamps it to [0, 1]).
+                socket = tuple(driven[0])
+                return ([_weighted(c, socket + (textures.COMPLEMENT,), 1.0 - fac) for c in a]
+                        + [_weighted(c, socket, fac) for c in b])
             return [c.scaled(1 - fac) for c in a] + [c.scaled(fac) for c in b]
         if t in ("BSDF_TRANSPARENT", "BSDF_TRANSLUCENT", "BSDF_SHEEN"):
             kind = {"BSDF_TRANSPARENT": "transparent", "BSDF_TRANSLUCENT": "translucent",
@@ -916,6 +925,16 @@ def _coordinates_read(materials) -> set:
     return keys
 
 
+def _weighted(closure: Closure, socket: tuple, default: float) -> Closure:
+    """``closure`` with one more per-hit factor on its weight (a Mix Shader's node-driven Fac,
+    or its complement, ``default`` the socket's own value so taken):
+    ``Closure.textures[textures.WEIGHT]``."""
+    out = closure.scaled(1.0)
+    out.textures[textures.WEIGHT] = (list(out.textures.get(textures.WEIGHT, []))
+                                     + [(socket, default)])
+    return out
+
+
 def _material_coordinates(material) -> set:
     """The per-corner coordinates one material's node-driven inputs and normal read."""
     keys: set = set()
@@ -928,7 +947,7 @@ def _material_coordinates(material) -> set:
             for socket, _constant in factors:
                 if socket is not None:
                     recorder = _CoordinateRecorder()
-                    nodes.evaluate(material.graph, tuple(socket), recorder, n=1)
+                    nodes.evaluate(material.graph, tuple(socket[:2]), recorder, n=1)
                     keys |= recorder.asked
     return keys
 
@@ -976,7 +995,9 @@ def material_from_nodes(mat, warn=None, images: dict | None = None) -> Material:
     for (node_name, _names), (_socket, value, socket_name) in reader.driven.items():
         warn(f"{reader.owner}: {socket_name} of '{node_name}' is driven by nodes; Lanterna "
              f"takes no per-hit value there and uses its default {_fmt(value)}")
-    seed = seed_reduction(closures)
+    # The static material (the planner's first guess; textured materials are replaced by
+    # their means at render time) with each node-driven Mix Fac at its socket's value.
+    seed = seed_reduction([c.scaled(textures.default_weight(c)) for c in closures])
     for note in seed.notes:
         warn(f"{reader.owner}: {note}")
     for note in textures.approximations(closures):
