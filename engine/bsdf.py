@@ -61,6 +61,7 @@ import numpy as np
 from . import fresnel as fresnel_model
 from . import microfacet
 from . import sampling
+from .shaders import seed_reduction
 from .textures import MaterialTextures
 from .lobes import (MicrofacetGlass, MicrofacetReflection, OrenNayar, Sheen, SmoothGlass,
                     SmoothReflection)
@@ -139,13 +140,23 @@ class MaterialTable:
                 share, average = material_averages(spec)
                 self.layer_kept[material_id] = share
                 self.layer_albedo[material_id] = average
-        self.transport_diffuse = self.diffuse * self.layer_kept
+        # Translucent closures (Cycles' Translucent BSDF): rho_t (M, 3), f = rho_t / pi for
+        # light from the far side; photons and gather rays see it as a diffuse share that
+        # leaves on the far side. Textured colours per hit (``SurfaceParams.translucent``).
+        self.translucent = np.array([seed_reduction(closures).translucent for closures in
+                                     self.textures.mean_closures], np.float64).reshape(-1, 3)
+        self.is_translucent = np.any(self.translucent > 0, axis=1)
+        self.has_translucent = bool(self.is_translucent.any())
+        self.transport_diffuse = self.diffuse * self.layer_kept + self.translucent
         self.transport_specular = self.specular + self.layer_albedo
         self.emitted_radiance = self.exitance / np.pi
         self.both_sides = table["both_sides"]
         self.diffuse_over_pi = self.diffuse / np.pi
         self.is_transport_specular = np.any(self.transport_specular > 0, axis=1)
-        self.is_diffuse = np.any(self.diffuse > 0, axis=1)
+        # Photons are stored, and the camera's diffuse estimates made, at hits that reflect or
+        # transmit diffusely.
+        self.reflects_diffuse = np.any(self.diffuse > 0, axis=1)
+        self.is_diffuse = self.reflects_diffuse | self.is_translucent
         self.is_specular = np.any(self.specular > 0, axis=1)
         self.is_emissive = np.any(self.exitance > 0, axis=1)
         self.has_specular = bool(self.is_specular.any())
@@ -244,7 +255,7 @@ class MaterialTable:
 # sample or a photon leaving an emitter reads no reflectance, a gather ray meeting an
 # emitter no emission texture).
 REFLECTANCE_SLOTS = ("diffuse", "specular", "diffuse_over_pi", "transport_diffuse",
-                     "transport_specular")
+                     "transport_specular", "translucent")
 EMISSION_SLOTS = ("exitance", "emitted_radiance")
 TEXTURED_SLOTS = REFLECTANCE_SLOTS + EMISSION_SLOTS
 
@@ -289,14 +300,17 @@ class SurfaceParams:
         table, material = self.table, self.material
         diffuse = np.take(table.diffuse, material, axis=0)
         specular = np.take(table.specular, material, axis=0)
+        translucent = np.take(table.translucent, material, axis=0)
         prim, bu, bv = self.hits
         for material_id, at in self._textured_hits(table.textured_reflectance):
-            diffuse[at], specular[at] = table.textures.reflectance(material_id, prim[at],
-                                                                   bu[at], bv[at])
+            diffuse[at], specular[at], translucent[at] = table.textures.reflectance(
+                material_id, prim[at], bu[at], bv[at], with_translucent=True)
         cache = self._cache
         cache["diffuse"], cache["specular"] = diffuse, specular
+        cache["translucent"] = translucent
         cache["diffuse_over_pi"] = diffuse / np.pi
-        cache["transport_diffuse"] = diffuse * np.take(table.layer_kept, material, axis=0)
+        cache["transport_diffuse"] = (diffuse * np.take(table.layer_kept, material, axis=0)
+                                      + translucent)
         cache["transport_specular"] = specular + np.take(table.layer_albedo, material, axis=0)
 
     def _emission_slots(self) -> None:
@@ -316,9 +330,12 @@ class SurfaceParams:
     emitted_radiance = property(lambda self: self._take("emitted_radiance"))
     both_sides = property(lambda self: self._take("both_sides"))
     is_diffuse = property(lambda self: self._take("is_diffuse"))
+    reflects_diffuse = property(lambda self: self._take("reflects_diffuse"))
     is_specular = property(lambda self: self._take("is_specular"))
     camera_glossy = property(lambda self: self._take("camera_glossy"))
     transport_diffuse = property(lambda self: self._take("transport_diffuse"))
+    translucent = property(lambda self: self._take("translucent"))
+    is_translucent = property(lambda self: self._take("is_translucent"))
     transport_specular = property(lambda self: self._take("transport_specular"))
     is_transport_specular = property(lambda self: self._take("is_transport_specular"))
 
@@ -334,7 +351,7 @@ class SurfaceParams:
         keep = np.take(self.table.layer_kept, self.material[index], axis=0)
         cache["diffuse"][index] = diffuse
         cache["diffuse_over_pi"][index] = diffuse / np.pi
-        cache["transport_diffuse"][index] = diffuse * keep
+        cache["transport_diffuse"][index] = diffuse * keep + cache["translucent"][index]
 
     def subset(self, index) -> "SurfaceParams":
         """The parameters of the hits ``index`` (an index array or mask)."""

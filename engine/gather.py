@@ -14,7 +14,8 @@ What it computes
         E = pi / (M N) * sum_jk L_jk. Where a gather ray lands:
         * on a diffuse surface: rho_d / pi * E of the precomputed estimates (direct and
           indirect light of that surface, as the photon map holds both); below a Principled
-          specular layer x (1 - E_layer(mu)) at the ray's own angle (Cycles' layering);
+          specular layer x (1 - E_layer(mu)) at the ray's own angle (Cycles' layering); a
+          translucent closure adds rho_t / pi * E of the estimates on the far side;
         * on a specular surface (``MaterialTable.is_transport_specular``: a mirror, glossy
           lobes, glass, a Principled layer) the ray also goes on, up to ``max_specular``
           bounces, by sampling the surface's lobes (``bsdf.sample_glossy``; mirrors reflect),
@@ -290,6 +291,15 @@ def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfa
             if throughput is not None:
                 value *= throughput[diffuse]
             radiance[ray_of[diffuse]] += value
+        if surfaces.materials.has_translucent:
+            # Translucent closures: rho_t / pi x the irradiance on the far side.
+            through = np.flatnonzero(np.any(surface.translucent > 0, axis=1))
+            if len(through):
+                e = estimates.lookup(x[through], -ng[through]).astype(np.float64)
+                value = e * surface.translucent[through] / np.pi
+                if throughput is not None:
+                    value *= throughput[through]
+                radiance[ray_of[through]] += value
         mirror = surface.is_transport_specular
         if bounce == max_specular or not mirror.any():
             break

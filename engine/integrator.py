@@ -441,6 +441,9 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
                 rho = rho + reflection_albedo(materials, surface.material[met], wo_met,
                                               n_met) / np.pi
                 value = photon.surface_irradiance(x[met], ng[met]) * rho * thr[met]
+                if materials.has_translucent:
+                    value += (photon.surface_irradiance(x[met], -ng[met]) * thr[met]
+                              * surface.translucent[met] / np.pi)
                 add_to_pixels(indirect_sums, rays[met] // spp, value)
                 if light is not None:
                     light.add(rays[met], value, direct=False)
@@ -479,7 +482,9 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
         if light is not None and depth == 0:
             _first_hit_colors(light, rays, surface, glossy)
 
-        diffuse = surface.is_diffuse
+        # Diffuse reflection (translucent closures, which pass light from the far side, are
+        # shaded apart: ``_shade_translucent``).
+        diffuse = surface.reflects_diffuse if materials.has_translucent else surface.is_diffuse
         if diffuse.all():
             idx = slice(None)
         elif diffuse.any():
@@ -523,6 +528,11 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
         if glossy is not None:
             _shade_glossy_direct(context, stats, rng, glossy, x, ns, ng, thr, rays, spp,
                                  direct_sums, light, depth)
+        if materials.has_translucent:
+            _shade_translucent(context, stats, rng, depth, x, ns, ns_smooth, ng, surface, thr,
+                               rays, spp, parts, light,
+                               None if photon is None or photon.lookups >= spp
+                               else first_lookup)
 
         if not follows:
             break
@@ -706,6 +716,60 @@ def _shade_caustics(context, stats, idx, x, ns, surface, glossy, thr, rays, spp,
         return
     _add_irradiance(e[lit], ask[lit], surface, glossy, thr, rays, spp, depth, indirect_sums,
                     light, not probe_lookup, rough)
+
+
+def _shade_translucent(context, stats, rng, depth, x, ns, ns_smooth, ng, surface, thr, rays,
+                       spp, parts, light, first_lookup):
+    """Translucent closures (Cycles' Translucent BSDF, f = rho_t / pi for light from the far
+    side) at a camera-path vertex: rho_t / pi x the irradiance on the far side, the side
+    whose normal is -n, estimated as at any diffuse point facing that way: direct light by
+    light samples from there (the Direct part), the cache / gather / photon estimate and
+    the caustic map with the far side's normal (the Indirect part; in ``photon-map`` mode
+    the photon estimate is the whole). ``parts``: the (emission, direct, indirect) pixel
+    sums; ``first_lookup``: the pixels' first asking sample when the estimate is asked by
+    fewer samples than the pixel has (``shade_block``), else None."""
+    on = np.flatnonzero(np.any(surface.translucent > 0, axis=1))
+    if len(on) == 0:
+        return
+    _emission, direct_sums, indirect_sums = parts
+    photon = context.indirect
+    factor = surface.translucent[on] / np.pi
+    if depth > 0:
+        factor = factor * thr[on]
+    kind = DIFFUSE if depth == 0 else None
+    back_x = x[on]
+    if context.settings.mode == "full":
+        terms = _counted_direct_terms(context, stats, rng, back_x, -ns[on], -ng[on])
+        if terms:
+            value = irradiance_from_terms(terms, len(on)) * factor
+            add_to_pixels(direct_sums, rays[on] // spp, value)
+            if light is not None:
+                light.add(rays[on], value, direct=depth == 0, kind=kind)
+        if context.caustics is not None:
+            t0 = time.perf_counter()
+            e = context.caustics.irradiance(back_x, -ns_smooth[on], stats)
+            stats["estimate_seconds"] += time.perf_counter() - t0
+            value = e * factor
+            add_to_pixels(indirect_sums, rays[on] // spp, value)
+            if light is not None:
+                light.add(rays[on], value, direct=False, kind=kind)
+    if photon is None:
+        return
+    ask = np.arange(len(on))
+    if first_lookup is not None:
+        s = rays[on]
+        ask = ask[(s - first_lookup[s // spp]) % spp < photon.lookups]
+    if len(ask) == 0:
+        return
+    at = on[ask]
+    t0 = time.perf_counter()
+    e = photon.irradiance(x[at], -ns_smooth[at], -ng[at], rng, stats)
+    stats["estimate_seconds"] += time.perf_counter() - t0
+    stats.pop("covered_mask", None)
+    value = e * (spp / min(photon.lookups, spp)) * factor[ask]
+    add_to_pixels(indirect_sums, rays[at] // spp, value)
+    if light is not None:
+        light.add(rays[at], value, direct=False, kind=kind)
 
 
 def _add_irradiance(e, at, surface, glossy, thr, rays, spp, depth, indirect_sums, light,
@@ -1011,5 +1075,7 @@ def _first_hit_colors(light, rays, surface, glossy):
         diffuse = diffuse * glossy.diffuse_factor
         specular = np.where(glossy.mask[:, None], glossy.reflected, specular)
         light.add_color(rays, TRANSMISSION, glossy.transmitted)
+    if surface.table.has_translucent:
+        diffuse = diffuse + surface.translucent       # Cycles' Diffuse passes hold it
     light.add_color(rays, DIFFUSE, diffuse)
     light.add_color(rays, GLOSSY, specular)

@@ -739,20 +739,43 @@ def trace_photons(scene: Scene, accel, emitted: EmittedPhotons, rng: np.random.G
         # upwards, and the photon left a closed room), while the incoming segment is on the
         # photon's side of every surface by construction. The pull-back is relative to the
         # coordinates only (as their rounding is), not to the scene's size, so geometry far
-        # away does not move the paths.
+        # away does not move the paths. A photon that goes through the surface (glass,
+        # translucent) starts from the hit itself, pushed to the far side: pulled back first,
+        # a push of the same size left it on the surface at normal incidence, and it met the
+        # same face again (measured: a translucent sheet under a zenith sun transmitted each
+        # photon twice, x rho_t^2).
+        x_hit = x
         pull = offset_distance(x, 0.0)
         x = x - sampling.scale_rows(d, pull.astype(d.dtype, copy=False))
         # A survivor scatters by the lobe the roulette chose, its power scaled by rho / P.
         scale_d = lobes.diffuse.albedo() / np.where(p_d > 0, p_d, 1.0)[:, None]
+        turn = None
+        if surfaces.materials.has_translucent:
+            # The diffuse pick's share rho_t of translucent closures leaves on the far side:
+            # through with probability q = max rho_t / (max rho_r + max rho_t), the power
+            # then x rho_t / (q P_d), else x rho_r / ((1 - q) P_d) (rho_r = rho - rho_t).
+            rho_t = surface.subset(live).translucent
+            rho_r = np.maximum(lobes.diffuse.albedo() - rho_t, 0.0)
+            m_t, m_r = rho_t.max(axis=1), rho_r.max(axis=1)
+            q = np.where(m_t > 0, m_t / np.where(m_t + m_r > 0, m_t + m_r, 1.0), 0.0)
+            through = go_diffuse & (rng.random(len(live)) < q)
+            if through.any():
+                p = np.where(p_d > 0, p_d, 1.0)[:, None]
+                scale_d = np.where(through[:, None],
+                                   rho_t / (np.where(q > 0, q, 1.0)[:, None] * p),
+                                   rho_r / (np.where(q < 1, 1.0 - q, 1.0)[:, None] * p))
+                turn = np.where(through, -1.0, 1.0).astype(n.dtype)[:, None]
         if go_diffuse.all():
-            d = lobes.diffuse.sample(-d, n, rng.random((len(live), 2)))[0]
+            d = lobes.diffuse.sample(-d, n if turn is None else n * turn,
+                                     rng.random((len(live), 2)))[0]
             power *= scale_d
         else:
             spec = ~go_diffuse
             new_dir = np.empty_like(d)
             if go_diffuse.any():
+                side = n[go_diffuse] if turn is None else n[go_diffuse] * turn[go_diffuse]
                 new_dir[go_diffuse] = lobes.diffuse.subset(go_diffuse).sample(
-                    -d[go_diffuse], n[go_diffuse], rng.random((int(go_diffuse.sum()), 2)))[0]
+                    -d[go_diffuse], side, rng.random((int(go_diffuse.sum()), 2)))[0]
             new_dir[spec] = lobes.mirror.subset(spec).sample(-d[spec], n[spec])[0]
             scale_s = lobes.mirror.albedo() / np.where(p_s > 0, p_s, 1.0)[:, None]
             if surfaces.materials.has_glossy:
@@ -769,6 +792,9 @@ def trace_photons(scene: Scene, accel, emitted: EmittedPhotons, rng: np.random.G
                     scale_s[g] = weight / np.where(p_s[g] > 0, p_s[g], 1.0)[:, None]
             power *= np.where(go_diffuse[:, None], scale_d, scale_s)
             d = new_dir
+        through = sampling.dot_rows(d, n) < 0              # n faces the arrival side
+        if through.any():
+            x = np.where(through[:, None], x_hit, x)
         o = accel.offset_origins(x, n, d)
 
     def cat(key, dtype, width):

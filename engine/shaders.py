@@ -40,7 +40,8 @@ refraction     (``bsdf.GlassLobe``: smooth or GGX dielectric); rho_s is its roul
 transparent    rho_s = Color, the roulette's share; rendered everywhere by a glass lobe of
                index 1 (straight through; behind it lit by photons, not shadow rays: reported)
 holdout        black (reported)
-translucent    rho_d = Color (reported)
+translucent    rho_t = Color (``SeedMaterial.translucent``): f = rho_t / pi for light arriving on
+               the far side (Cycles' Translucent BSDF), the far side's irradiance x rho_t / pi
 sheen          rho_s = Color, the roulette's share; rendered everywhere by the microfibre lobe
                (``bsdf.SheenLobe``; Ashikhmin is reported and rendered as Microfiber)
 emission       M = pi x Color x Strength (radiance Color x Strength on each side)
@@ -150,6 +151,8 @@ class SeedMaterial:
     specular: np.ndarray
     exitance: np.ndarray
     notes: list = field(default_factory=list)
+    # rho_t: the translucent closures' diffuse transmission (light from the far side)
+    translucent: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 def _fmt(value) -> str:
@@ -206,6 +209,7 @@ def seed_reduction(closures) -> SeedMaterial:
     table), with one note per approximation, each naming the node. Values are not clipped
     (export clips them, with its own message)."""
     diffuse, specular, exitance = np.zeros(3), np.zeros(3), np.zeros(3)
+    translucent = np.zeros(3)
     notes: list[str] = []
 
     def note(message: str) -> None:
@@ -243,9 +247,7 @@ def seed_reduction(closures) -> SeedMaterial:
         elif c.kind == "holdout":
             note(f"Holdout {name} is not supported; rendered black")
         elif c.kind == "translucent":
-            d = p["color"]
-            note(f"Translucent BSDF {name} is not supported; treated as a diffuse of colour "
-                 f"{_fmt(d)}")
+            translucent = translucent + w * np.asarray(p["color"], np.float64)
         elif c.kind == "sheen":
             # Rendered by its microfibre lobe (``bsdf.SheenLobe``); rho_s is its roulette share.
             s = np.asarray(p["color"], np.float64)
@@ -258,7 +260,7 @@ def seed_reduction(closures) -> SeedMaterial:
         diffuse = diffuse + w * d
         specular = specular + w * s
         exitance = exitance + w * e
-    return SeedMaterial(diffuse, specular, exitance, notes)
+    return SeedMaterial(diffuse, specular, exitance, notes, translucent)
 
 
 def lobe_names(closures) -> list[str]:

@@ -345,15 +345,20 @@ class MaterialTextures:
         diffuse, specular = self.reflectance(material_id, prim, bu, bv)
         return diffuse, specular, self.exitance(material_id, prim, bu, bv)
 
-    def reflectance(self, material_id: int, prim, bu, bv):
+    def reflectance(self, material_id: int, prim, bu, bv, with_translucent: bool = False):
         """(diffuse, specular) (k, 3) of :meth:`reduction` alone: only the node-driven inputs
-        that they read are evaluated (an emission texture is not)."""
+        that they read are evaluated (an emission texture is not); ``with_translucent``: also
+        the translucent closures' rho_t (``shaders.SeedMaterial.translucent``). Where
+        rho_d + rho_s + rho_t exceeds 1 in a channel, all three are scaled down together."""
         n = len(prim)
         seed = seed_reduction(self.closures_at(material_id, prim, bu, bv, "reflectance"))
-        diffuse, specular = (np.maximum(np.broadcast_to(x, (n, 3)), 0.0)
-                             for x in (seed.diffuse, seed.specular))
-        total = (diffuse + specular).max(axis=1, keepdims=True)
+        diffuse, specular, translucent = (np.maximum(np.broadcast_to(x, (n, 3)), 0.0)
+                                          for x in (seed.diffuse, seed.specular,
+                                                    seed.translucent))
+        total = (diffuse + specular + translucent).max(axis=1, keepdims=True)
         scale = 1.0 / np.maximum(total, 1.0)
+        if with_translucent:
+            return diffuse * scale, specular * scale, translucent * scale
         return diffuse * scale, specular * scale
 
     def exitance(self, material_id: int, prim, bu, bv):
