@@ -22,6 +22,13 @@ def test_defaults_fill_every_parameter_and_unknown_ones_are_refused():
         Closure("velvet")
 
 
+def test_translucent_closure_transmits_its_colour():
+    seed = seed_reduction([Closure("translucent", params={"color": (0.1, 0.2, 0.3)},
+                                   weight=(0.5, 0.5, 0.5))])
+    np.testing.assert_allclose(seed.translucent, [0.05, 0.1, 0.15], rtol=1e-12)
+    np.testing.assert_allclose(seed.diffuse, 0.0)
+
+
 @pytest.mark.parametrize("closure, diffuse, specular, exitance, noted", [
     (Closure("principled", params={"base_color": (0.5, 0.4, 0.3), "metallic": 0.25,
                                    "roughness": 0.0, "emission": (1.0, 0.5, 0.25)}),
@@ -51,8 +58,9 @@ def test_defaults_fill_every_parameter_and_unknown_ones_are_refused():
      ["Transparent BSDF 'T': light reaches what lies behind it"]),
     (Closure("holdout", node="H"), [0] * 3, [0] * 3, [0] * 3,
      ["Holdout 'H' is not supported"]),
-    (Closure("translucent", params={"color": (0.1, 0.2, 0.3)}, node="L"), [0.1, 0.2, 0.3],
-     [0] * 3, [0] * 3, ["Translucent BSDF 'L' is not supported"]),
+    # Translucent: no reflection; its rho_t is ``SeedMaterial.translucent`` (tested below).
+    (Closure("translucent", params={"color": (0.1, 0.2, 0.3)}, node="L"), [0] * 3,
+     [0] * 3, [0] * 3, []),
     (Closure("emission", params={"radiance": (2.0, 1.0, 0.0)}), [0] * 3, [0] * 3,
      [2 * math.pi, math.pi, 0], []),
 ])
