@@ -135,10 +135,18 @@ def test_open_material_scenes_do_not_regress(name):
     assert worst_bright_region(name) <= OPEN[name][1]
 
 
+# The glass scene is a strict xfail (7.7 / 6.1 %, well over its 5 %). The copper sphere's
+# worst region is its highlight's noise around the bound (14 seeds: mean 1.000 of Cycles,
+# deviation 2.2 % at ``final``; the module docstring), so whether one seed passes is chance:
+# not strict, or the suite would fail on a new noise realisation rather than on a fix.
 @pytest.mark.parity
-@pytest.mark.xfail(strict=True, reason="issue 23 open: the copper's highlight and the glass "
-                                      "scene's floor")
-@pytest.mark.parametrize("name", list(OPEN))
+@pytest.mark.parametrize("name", [
+    pytest.param("metal_sphere", marks=pytest.mark.xfail(
+        strict=False, reason="issue 23 open: the copper's highlight region is noise of 2.2 % "
+                             "at final around a 3 % bound")),
+    pytest.param("glass_caustic", marks=pytest.mark.xfail(
+        strict=True, reason="issue 23 open: the glass scene's far floor (7.7 / 6.1 %)")),
+])
 def test_open_material_scenes_meet_the_issue_bound(name):
     assert worst_bright_region(name) <= OPEN[name][0]
 
