@@ -17,11 +17,14 @@ per hit, export warned and mixed at the socket's value 0.5 everywhere: emission 
 colour 25.8 %, lit 4.3 % off (its regions hold both colours of squares).
 """
 import pathlib
+import sys
 
 import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from inline_cycles import black_world, cycles_image  # noqa: E402
 
 BOUND = 0.02
 SIZE = 32
@@ -54,10 +57,7 @@ def _build(kind):
     bpy.ops.object.camera_add(location=(0, 0, 2.5)); scene.camera = bpy.context.object
     if kind == "lit":
         bpy.ops.object.light_add(type="SUN", rotation=(0.4, 0.2, 0.0)); bpy.context.object.data.energy = 3.0; bpy.context.object.data.angle = 0
-    w = bpy.data.worlds.new("B")
-    if w.node_tree is None:
-        w.use_nodes = True
-    w.node_tree.nodes["Background"].inputs["Strength"].default_value = 0; scene.world = w
+    black_world(bpy, scene)
     return scene
 
 def _regions(image):
@@ -73,14 +73,7 @@ def _worst(kind, tmp_path, seed=1):
     assert not exported.warnings, exported.warnings
     ours = np.asarray(render(exported, RenderSettings(seed=seed, preset="preview")).image,
                       np.float64).reshape(SIZE, SIZE, 3)
-    scene.render.engine = "CYCLES"
-    scene.cycles.samples = 64
-    scene.cycles.use_denoising = False
-    scene.render.image_settings.file_format = "OPEN_EXR"
-    scene.render.filepath = str(pathlib.Path(tmp_path) / "cycles.exr")
-    bpy.ops.render.render(write_still=True)
-    image = bpy.data.images.load(scene.render.filepath)
-    theirs = np.array(image.pixels[:], np.float64).reshape(SIZE, SIZE, 4)[::-1, :, :3]
+    theirs = cycles_image(bpy, scene, tmp_path, 64)
     return float(np.abs(_regions(ours) / _regions(theirs) - 1.0).max())
 
 

@@ -26,11 +26,14 @@
 """
 import math
 import pathlib
+import sys
 
 import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from inline_cycles import black_world, cycles_image  # noqa: E402
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 SHADE_BOUND = 0.05
@@ -50,14 +53,6 @@ def _material(name: str, node: str, colour):
     return mat
 
 
-def _black_world(scene):
-    world = bpy.data.worlds.new("Black")
-    if world.node_tree is None:
-        world.use_nodes = True
-    world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
-    scene.world = world
-
-
 def _sun(rotation, energy):
     bpy.ops.object.light_add(type="SUN", rotation=rotation)
     bpy.context.object.data.energy = energy
@@ -65,16 +60,7 @@ def _sun(rotation, energy):
 
 
 def _cycles(scene, tmp_path, samples):
-    scene.render.engine = "CYCLES"
-    scene.cycles.samples = samples
-    scene.cycles.use_adaptive_sampling = False
-    scene.cycles.use_denoising = False
-    scene.render.image_settings.file_format = "OPEN_EXR"
-    scene.render.filepath = str(pathlib.Path(tmp_path) / "cycles.exr")
-    bpy.ops.render.render(write_still=True)
-    image = bpy.data.images.load(scene.render.filepath)
-    w, h = scene.render.resolution_x, scene.render.resolution_y
-    return np.array(image.pixels[:], np.float64).reshape(h, w, 4)[::-1, :, :3]
+    return cycles_image(bpy, scene, tmp_path, samples, adaptive=False)
 
 
 def _lanterna(scene, seed, preset):
@@ -110,7 +96,7 @@ def _lit_from_behind(mixed: bool):
     _sun((math.pi - 0.5, 0.0, 0.0), 3.0)                 # from below, 0.5 rad off the axis
     if mixed:
         _sun((0.3, 0.2, 0.0), 2.0)                       # from above
-    _black_world(scene)
+    black_world(bpy, scene)
     return scene
 
 
@@ -148,7 +134,7 @@ def _sheet_over_floor(side_view: bool):
         bpy.ops.object.camera_add(location=(0.0, 0.0, 0.9))
     scene.camera = bpy.context.object
     _sun((0.0, 0.0, 0.0), 3.0)
-    _black_world(scene)
+    black_world(bpy, scene)
     return scene
 
 

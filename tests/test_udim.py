@@ -17,11 +17,15 @@ The packed case packs the tiles into the .blend's data and deletes the files: ex
 the packed bytes.
 """
 import os
+import pathlib
+import sys
 
 import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from inline_cycles import black_world, cycles_image  # noqa: E402
 
 SIZE = 32
 TILES = (1001, 1002, 1011)
@@ -71,11 +75,7 @@ def _build(tmp_path, packed: bool):
     plane.data.materials.append(mat)
     bpy.ops.object.camera_add(location=(0.0, 0.0, 2.5))
     scene.camera = bpy.context.object
-    world = bpy.data.worlds.new("Black")
-    if world.node_tree is None:
-        world.use_nodes = True
-    world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
-    scene.world = world
+    black_world(bpy, scene)
     return scene
 
 
@@ -84,14 +84,7 @@ def _regions(image):
 
 
 def _cycles(scene, tmp_path):
-    scene.render.engine = "CYCLES"
-    scene.cycles.samples = 64
-    scene.cycles.use_denoising = False
-    scene.render.image_settings.file_format = "OPEN_EXR"
-    scene.render.filepath = str(tmp_path / "cycles.exr")
-    bpy.ops.render.render(write_still=True)
-    image = bpy.data.images.load(str(tmp_path / "cycles.exr"))
-    return np.array(image.pixels[:], np.float64).reshape(SIZE, SIZE, 4)[::-1, :, :3]
+    return cycles_image(bpy, scene, tmp_path, 64)
 
 
 def _worst(scene, tmp_path, seed: int = 1) -> float:
