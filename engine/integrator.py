@@ -495,10 +495,7 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
             # The indirect estimate at the diffuse hits of the samples that ask for it.
             ask = idx if isinstance(idx, np.ndarray) else np.arange(len(prim))
             if photon.lookups < spp:
-                # The pixel's strata come in a fixed order: start at a random one per pixel,
-                # so the asking samples are a uniform pick over the pixel's filter footprint.
-                s = rays[ask]
-                ask = ask[(s - first_lookup[s // spp]) % spp < photon.lookups]
+                ask = _asking(ask, rays[ask], spp, first_lookup, photon.lookups)
             if len(ask):
                 t0 = time.perf_counter()
                 e = photon.irradiance(x[ask], ns_smooth[ask], ng[ask], rng, stats)
@@ -718,6 +715,14 @@ def _shade_caustics(context, stats, idx, x, ns, surface, glossy, thr, rays, spp,
                     light, not probe_lookup, rough)
 
 
+def _asking(candidates, samples, spp, first_lookup, lookups):
+    """The ``candidates`` whose samples (their camera sample indices ``samples``) ask for the
+    indirect estimate when only ``lookups`` of a pixel's ``spp`` do. The pixel's strata come
+    in a fixed order: start at a random one per pixel (``first_lookup``), so the asking
+    samples are a uniform pick over the pixel's filter footprint."""
+    return candidates[(samples - first_lookup[samples // spp]) % spp < lookups]
+
+
 def _shade_translucent(context, stats, rng, depth, x, ns, ns_smooth, ng, surface, thr, rays,
                        spp, parts, light, first_lookup):
     """Translucent closures (Cycles' Translucent BSDF, f = rho_t / pi for light from the far
@@ -757,8 +762,7 @@ def _shade_translucent(context, stats, rng, depth, x, ns, ns_smooth, ng, surface
         return
     ask = np.arange(len(on))
     if first_lookup is not None:
-        s = rays[on]
-        ask = ask[(s - first_lookup[s // spp]) % spp < photon.lookups]
+        ask = _asking(ask, rays[on], spp, first_lookup, photon.lookups)
     if len(ask) == 0:
         return
     at = on[ask]

@@ -29,3 +29,15 @@ def cycles_image(bpy, scene, tmp_path, samples: int, adaptive: bool = True) -> n
     image = bpy.data.images.load(scene.render.filepath)
     w, h = scene.render.resolution_x, scene.render.resolution_y
     return np.array(image.pixels[:], np.float64).reshape(h, w, 4)[::-1, :, :3]
+
+
+def node_material(bpy, name: str):
+    """A new material with an empty node tree but its Material Output: (material, tree,
+    output node)."""
+    mat = bpy.data.materials.new(name)
+    if mat.node_tree is None:
+        mat.use_nodes = True
+    tree = mat.node_tree
+    tree.nodes.clear()
+    return mat, tree, tree.nodes.new("ShaderNodeOutputMaterial")
+

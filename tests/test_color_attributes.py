@@ -21,7 +21,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from inline_cycles import black_world, cycles_image  # noqa: E402
+from inline_cycles import black_world, cycles_image, node_material  # noqa: E402
 
 SIZE = 32
 BOUND = 0.02
@@ -45,13 +45,7 @@ def _build(kind: str):
     else:
         attr = mesh.attributes.new("Height", "FLOAT", "FACE")
         attr.data.foreach_set("value", rng.random(len(mesh.polygons)).astype(np.float32))
-    mat = bpy.data.materials.new("Painted")
-    tree = mat.node_tree if mat.node_tree is not None else None
-    if tree is None:
-        mat.use_nodes = True
-        tree = mat.node_tree
-    tree.nodes.clear()
-    out = tree.nodes.new("ShaderNodeOutputMaterial")
+    mat, tree, out = node_material(bpy, "Painted")
     if kind == "lit":
         shader = tree.nodes.new("ShaderNodeBsdfDiffuse")
     else:

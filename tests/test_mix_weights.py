@@ -24,7 +24,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from inline_cycles import black_world, cycles_image  # noqa: E402
+from inline_cycles import black_world, cycles_image, node_material  # noqa: E402
 
 BOUND = 0.02
 SIZE = 32
@@ -35,12 +35,7 @@ def _build(kind):
     scene.render.resolution_x = scene.render.resolution_y = SIZE
     bpy.ops.mesh.primitive_plane_add(size=2.0)
     plane = bpy.context.object
-    mat = bpy.data.materials.new("Mixed")
-    if mat.node_tree is None:
-        mat.use_nodes = True
-    tree = mat.node_tree
-    tree.nodes.clear()
-    out = tree.nodes.new("ShaderNodeOutputMaterial")
+    mat, tree, out = node_material(bpy, "Mixed")
     mix = tree.nodes.new("ShaderNodeMixShader")
     checker = tree.nodes.new("ShaderNodeTexChecker"); checker.inputs["Scale"].default_value = 4.0
     checker.inputs["Color1"].default_value = (0.9, 0.9, 0.9, 1); checker.inputs["Color2"].default_value = (0.2, 0.2, 0.2, 1)

@@ -33,7 +33,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from inline_cycles import black_world, cycles_image  # noqa: E402
+from inline_cycles import black_world, cycles_image, node_material  # noqa: E402
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 SHADE_BOUND = 0.05
@@ -41,12 +41,7 @@ SIDE_BOUND = 0.03
 
 
 def _material(name: str, node: str, colour):
-    mat = bpy.data.materials.new(name)
-    if mat.node_tree is None:
-        mat.use_nodes = True
-    tree = mat.node_tree
-    tree.nodes.clear()
-    out = tree.nodes.new("ShaderNodeOutputMaterial")
+    mat, tree, out = node_material(bpy, name)
     shader = tree.nodes.new(node)
     shader.inputs["Color"].default_value = (*colour, 1.0)
     tree.links.new(shader.outputs[0], out.inputs[0])

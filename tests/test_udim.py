@@ -25,7 +25,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from inline_cycles import black_world, cycles_image  # noqa: E402
+from inline_cycles import black_world, cycles_image, node_material  # noqa: E402
 
 SIZE = 32
 TILES = (1001, 1002, 1011)
@@ -60,12 +60,7 @@ def _build(tmp_path, packed: bool):
     for loop in plane.data.uv_layers.active.data:
         u, v = loop.uv
         loop.uv = (-0.5 + 3.5 * u, 2.0 * v)
-    mat = bpy.data.materials.new("Painted")
-    if mat.node_tree is None:
-        mat.use_nodes = True
-    tree = mat.node_tree
-    tree.nodes.clear()
-    out = tree.nodes.new("ShaderNodeOutputMaterial")
+    mat, tree, out = node_material(bpy, "Painted")
     emission = tree.nodes.new("ShaderNodeEmission")
     texture = tree.nodes.new("ShaderNodeTexImage")
     texture.image = image

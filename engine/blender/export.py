@@ -366,6 +366,11 @@ def _read_attributes(mesh, data: _MeshData, keys, warn, owner: str) -> None:
     edge-domain or unsupported type is reported and read as missing. UV maps named by an
     Attribute node come from ``data.uv_maps``."""
     n_tri = data.count
+
+    def two_d(name: str) -> str:
+        return (f"{owner}: an Attribute node reads the 2-D attribute '{name}'; its Fac is the "
+                "mean of (x, y, 0) here, Cycles gives x")
+
     for key in keys:
         if key in data.attributes or not key.startswith(("color", "attr:")):
             continue
@@ -377,8 +382,7 @@ def _read_attributes(mesh, data: _MeshData, keys, warn, owner: str) -> None:
         if key.startswith("attr:") and name in data.uv_maps:
             uv = data.uv_maps[name][data.corner_loops].reshape(n_tri, 3, 2)
             out[..., :2], out[..., 3] = uv, 1.0
-            warn(f"{owner}: an Attribute node reads the 2-D attribute '{name}'; its Fac is "
-                 "the mean of (x, y, 0) here, Cycles gives x")
+            warn(two_d(name))
             continue
         attr = mesh.attributes.get(name)
         if attr is None:
@@ -409,8 +413,7 @@ def _read_attributes(mesh, data: _MeshData, keys, warn, owner: str) -> None:
         else:
             out[..., :width], out[..., 3] = per_corner, 1.0
             if width == 2:
-                warn(f"{owner}: an Attribute node reads the 2-D attribute '{name}'; its Fac "
-                     "is the mean of (x, y, 0) here, Cycles gives x")
+                warn(two_d(name))
         if not np.all(np.isfinite(out)):
             warn(f"{owner}: attribute '{name}' holds NaN or infinite values; they read 0")
             np.nan_to_num(out, copy=False, nan=0.0, posinf=0.0, neginf=0.0)
