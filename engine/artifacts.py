@@ -199,6 +199,16 @@ def _feed(h, value):
         h.update(b"r" + repr(value).encode())
 
 
+def _feed_world(h, world) -> None:
+    h.update(b"world")
+    _feed(h, np.asarray(world.radiance, np.float64))
+    env = world.environment
+    if env is not None:             # an image world: its pixels and how they are mapped
+        h.update(f"{env.projection}|{env.interpolation}|{env.encoding}".encode())
+        for arr in (env.pixels, env.strength, env.rotation):
+            _feed(h, np.ascontiguousarray(arr))
+
+
 def _feed_fields(h, obj):
     h.update(type(obj).__name__.encode() + b"{")
     for f in dataclasses.fields(obj):
@@ -232,18 +242,14 @@ def scene_parts(scene) -> dict:
     h = hashlib.sha256()
     for light in scene.lights:
         _feed_fields(h, light)
-    h.update(b"world")
-    _feed(h, np.asarray(scene.world.radiance, np.float64))
-    env = scene.world.environment
-    if env is not None:             # an image world: its pixels and how they are mapped
-        h.update(f"{env.projection}|{env.interpolation}|{env.encoding}".encode())
-        for arr in (env.pixels, env.strength, env.rotation):
-            _feed(h, np.ascontiguousarray(arr))
+    _feed_world(h, scene.world)
     for portal in scene.world.portals:
         _feed_fields(h, portal)
     parts["lights"] = h.hexdigest()
     h = hashlib.sha256()
     _feed_fields(h, scene.camera)
+    if scene.world.camera is not None:      # what camera rays see of the world, apart
+        _feed_world(h, scene.world.camera)
     parts["camera"] = h.hexdigest()
     return parts
 

@@ -9,7 +9,9 @@ What it computes
     hit's albedos), nothing of which is computed otherwise.
     ``shade_block(context, index, pixels, camera)``  one batch: ``samples`` rays a pixel
         through the Blackman-Harris filter (``engine/camera.py``); at each hit
-        * emission (surfaces and the world seen from the camera or in mirrors);
+        * emission (surfaces and the world seen from the camera or in mirrors; camera rays,
+          also those gone straight through transparent surfaces, see
+          ``World.seen_by_camera``: ``world_along``);
         * at a diffuse hit, ``full`` mode: exact direct light (``engine/direct.py``) times
           rho_d / pi, plus the indirect estimator of ``context.indirect``
           (``engine/indirect.py``: cache, gather or photon map) at the samples that ask;
@@ -87,6 +89,9 @@ MAX_HISTOGRAM_MATERIALS = 64
 EDGE_SAMPLES_FACTOR = 16    # an emitter edge's pixel: this x samples for its emission
 # Extra texture look-ups per primary sample on a textured material (``supersample_textures``).
 TEXTURE_SUPERSAMPLES = 7
+# A bounce whose new direction has this cosine or more with the old one went on straight
+# (a transparent surface): the ray stays a camera ray (``scene.World.camera``).
+STRAIGHT_ON = 1.0 - 1e-5
 
 # How glossy lobes take the light of the lights their own rays meet (area lights, lights with
 # a radius, emissive meshes, the world): "mis", both strategies weighted by the power
@@ -327,8 +332,11 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
     # Rays after a bounce see the lights that are not geometry (area lights, lights with a
     # radius: ``lights.ray_visible``).
     ray_lights = any(ray_visible(light) for light in context.lights.sampled)
-    world = scene.world.radiance
-    image_world = scene.world.environment is not None     # radiance per direction
+    # Where the world's nodes tell camera rays apart (``World.camera``), each ray after the
+    # first hit carries whether it is still a camera ray: it went on straight through
+    # transparent surfaces only, which keep Cycles' camera flag.
+    track_camera = scene.world.camera is not None
+    camera_rays = cam = None
     if photon is not None and photon.lookups < spp:
         first_lookup = rng.integers(0, spp, pixels)
     # Emitter edges: their camera-seen emission is estimated apart (``edge_emission``).
@@ -367,9 +375,12 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
                 if light is not None:
                     light.add(ray_of[seen], value, direct=depth == 1)
         all_hit = bool(hit.all())
-        if not all_hit and not scene.world.is_black:
-            seen_world = scene.world.radiance_towards(directions[~hit]) if image_world \
-                else np.broadcast_to(world, (int((~hit).sum()), 3))
+        seen_world = None
+        if not all_hit:
+            seen_world = world_along(scene.world, directions[~hit],
+                                     depth == 0 or (camera_rays is not None
+                                                    and camera_rays[~hit]))
+        if seen_world is not None:
             missed = seen_world if throughput is None else throughput[~hit] * seen_world
             if depth == 0 and own_emission is not None:
                 missed = missed * own_emission[ray_of[~hit]][:, None]
@@ -392,11 +403,13 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
             d, o, rays = directions[hit], origins[hit], ray_of[hit]
             thr = None if throughput is None else throughput[hit]
             probing = None if probes is None else probes[hit]
+            cam = None if camera_rays is None else camera_rays[hit]
             if mis_pdf is not None:
                 mis_pdf, mis_x, mis_n = mis_pdf[hit], mis_x[hit], mis_n[hit]
         else:
             t_hit, d, o, rays, thr = _t, directions, origins, ray_of, throughput
             probing = probes
+            cam = camera_rays
         # Samples in order (primary rays, all hit): pixel sums need no index.
         in_order = depth == 0 and all_hit
         pixel_of = None if in_order else rays // spp
@@ -456,6 +469,7 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
             thr = thr[shaded]
             surface = surface.subset(shaded)
             pixel_of = rays // spp
+            cam = None if cam is None else cam[shaded]
 
         # A node-driven Normal (a Normal Map) shades what the camera path computes here:
         # direct light and the glossy and glass lobes; the indirect estimates (cache, gather,
@@ -563,6 +577,9 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
         tmax = None
         throughput = thr[idx] * weight
         ray_of = rays[idx]
+        if track_camera:
+            was = np.ones(len(idx), bool) if depth == 0 else cam[idx]
+            camera_rays = was & (sampling.dot_rows(directions, d[idx]) > STRAIGHT_ON)
         if light is not None and depth == 0:
             # The first bounce's kind: through the surface (glass refracting) Transmission,
             # else (mirror, glossy lobes, glass reflecting) Glossy.
@@ -624,14 +641,32 @@ def emitter_edges(scene, accel, surfaces, filter_width: float):
     return hi > lo
 
 
+def world_along(world, directions: np.ndarray, camera) -> np.ndarray | None:
+    """The radiance (M, 3) of ``world`` along the unit ``directions`` (M, 3) of rays that left
+    the scene, or None where it is black for all of them. ``camera``: True, False, or (M,) bool,
+    which rays are camera rays and see ``world.seen_by_camera`` (``scene.World.camera``)."""
+    if world.camera is None or not np.any(camera):
+        return None if world.is_black else world.radiance_towards(directions)
+    if np.all(camera):
+        seen = world.camera
+        return None if seen.is_black else seen.radiance_towards(directions)
+    out = np.zeros((len(directions), 3))
+    for part, rows in ((world, ~camera), (world.camera, camera)):
+        if rows.any() and not part.is_black:
+            out[rows] = part.radiance_towards(directions[rows])
+    return out
+
+
 def _seen_emission(scene, accel, surfaces, origins, directions, tmax, split=False):
     """Radiance (N, 3) the rays see first: an emitter's (on its emitting side) or the world's
     where they miss; 0 on other surfaces. ``split``: also the world's part alone."""
     _t, prim, bu, bv = accel.intersect(origins, directions, tmax)
     out = np.zeros((len(origins), 3))
     hit = prim >= 0
-    if not scene.world.is_black and not hit.all():
-        out[~hit] = scene.world.radiance_towards(directions[~hit])
+    if not hit.all():
+        world = world_along(scene.world, directions[~hit], True)
+        if world is not None:
+            out[~hit] = world
     if hit.any():
         p = prim[hit]
         front = sampling.dot_rows(np.take(surfaces.geometric_normals, p, axis=0),

@@ -300,16 +300,26 @@ class World:
     sky), that image's radiance per direction; ``radiance`` is then its mean over the sphere
     (for estimates and reports). ``portals``: Cycles' light portals (area lights marked
     ``is_portal``, emitting side into the room), windows through which the environment's
-    photons and light samples go; they are not lights."""
+    photons and light samples go; they are not lights. ``camera``: where the world's nodes
+    read Cycles' Light Path Is Camera Ray, the World that camera rays see (those from the
+    camera and those that went on straight through transparent surfaces); this World (with
+    Is Camera Ray 0) lights the scene and is what reflections, refractions, gather rays and
+    photons meet. None: the camera sees this World too."""
 
     radiance: np.ndarray = field(default_factory=lambda: np.zeros(3))
     environment: object = None
     portals: list = field(default_factory=list)
+    camera: "World | None" = None
 
     def __post_init__(self):
         if self.environment is not None:
             self.radiance = self.environment.mean_radiance()
         self.radiance = _rgb(self.radiance, "World", "colour")
+
+    @property
+    def seen_by_camera(self) -> "World":
+        """The World camera rays see (``camera``, or this one)."""
+        return self if self.camera is None else self.camera
 
     @property
     def is_black(self) -> bool:

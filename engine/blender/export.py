@@ -82,8 +82,10 @@ animation already applied by Blender) and turns it into the renderer's inert sce
   Cycles' ``is_portal`` become its portals, not lights. Otherwise a uniform environment of
   radiance = Background Color x Strength
   [W m^-2 sr^-1] (Mix/Add shaders of backgrounds are combined); a linked Color or Strength is
-  reported and its default used; no world is black. A new World in Blender 5 is grey 0.05 and
-  Cycles adds it, so it is kept.
+  evaluated when its nodes need no coordinate, else reported and its default used; no world
+  is black. A new World in Blender 5 is grey 0.05 and Cycles adds it, so it is kept. A world
+  that reads Light Path Is Camera Ray (to be seen in one colour and light in another) is read
+  for camera rays and for all others: ``World.camera`` is what camera rays see.
 * **Camera**: the scene's active camera, perspective (orthographic and panoramic cameras are
   reported and treated as perspective with the same lens and sensor). Blender's sensor fit:
   AUTO fits Sensor Width to the larger side of the frame (in pixels x pixel aspect), HORIZONTAL
@@ -133,7 +135,8 @@ from ..settings import RenderSettings
 from . import compat
 from .. import nodes
 from .. import textures
-from .world_export import environment_of
+from .world_export import (CAMERA_RAY, LIGHTING_RAY, decided_socket, decided_source,
+                           environment_of, graph_maker, light_path_outputs)
 from ..shaders import CLOSURE_KINDS, Closure, seed_reduction
 from .node_export import export_graph
 from ..scene import (AREA_SHAPES, AreaLight, Camera, Material, PointLight, Scene, SceneError,
@@ -602,10 +605,14 @@ class _NodeReader:
     a material's ``tree``, inputs driven by nodes the evaluator supports are kept per-hit
     (``driven``; :meth:`attach_textures`)."""
 
-    def __init__(self, owner: str, warn: _Warnings, tree=None, images: dict | None = None):
+    def __init__(self, owner: str, warn: _Warnings, tree=None, images: dict | None = None,
+                 constants=None):
         self.owner = owner      # e.g. "Material 'Wood'"
         self.warn = warn
         self.tree = tree
+        # A world's: (Light Path inputs, graph maker): linked inputs whose nodes need nothing
+        # per hit are evaluated to one constant for that ray (``world_export.CAMERA_RAY``).
+        self.constants = constants
         self.images = {} if images is None else images
         self.graph = None       # the tree as ``nodes.Graph``, read when first needed
         # (node name, socket names) -> (graph socket, the socket's own value, label) for
@@ -698,6 +705,8 @@ class _NodeReader:
         sock = self.input(node, *names)
         if sock is None:
             return convert(default)
+        if self.constants is not None:     # a world: past the mixes its ray decides
+            sock = decided_socket(sock, *self.constants)
         value = convert(sock.default_value) if hasattr(sock, "default_value") else convert(default)
         self.values[(node.name, tuple(names))] = value
         src = self.source(sock)
@@ -706,6 +715,14 @@ class _NodeReader:
         src_node, out = src
         if src_node.type in ("RGB", "VALUE") and hasattr(out, "default_value"):
             return convert(out.default_value)
+        if self.constants is not None:
+            ray, graph_of = self.constants
+            try:
+                evaluated = nodes.evaluate(graph_of(), (src_node.name, out.identifier),
+                                           dict(ray), n=1)
+                return convert(np.asarray(evaluated, float)[0])
+            except (nodes.UnsupportedNode, nodes.MissingInput, KeyError):
+                pass
         if self.tree is not None:
             socket, reason = self._graph_socket(src_node, out)
             if socket is not None:
@@ -1158,8 +1175,10 @@ def _world_radiance(reader: _NodeReader, src, depth: int = 0) -> np.ndarray:
                 * reader.scalar(node, "Strength", default=1.0))
     if t in ("MIX_SHADER", "ADD_SHADER") and depth < 64:
         shaders = [s for s in node.inputs if s.type == "SHADER"]
-        a = _world_radiance(reader, reader.source(shaders[0]), depth + 1)
-        b = _world_radiance(reader, reader.source(shaders[1]), depth + 1)
+        follow = reader.source if reader.constants is None else \
+            (lambda socket: decided_source(socket, *reader.constants))
+        a = _world_radiance(reader, follow(shaders[0]), depth + 1)
+        b = _world_radiance(reader, follow(shaders[1]), depth + 1)
         if t == "ADD_SHADER":
             return a + b
         fac = float(np.clip(reader.scalar(node, "Fac", "Factor", default=0.5), 0, 1))
@@ -1169,26 +1188,48 @@ def _world_radiance(reader: _NodeReader, src, depth: int = 0) -> np.ndarray:
     return np.zeros(3)
 
 
-def _export_world(world, warn: _Warnings, portals=()) -> World:
-    if world is None:
-        return World(portals=list(portals))
-    tree = world.node_tree
-    if compat.uses_nodes(world):
-        environment = environment_of(world, warn)
-        if environment is not None:
-            return World(environment=environment, portals=list(portals))
+def _world_for(world, warn: _Warnings, ray) -> World:
+    """The World a ray of Light Path values ``ray`` meets (``world_export.CAMERA_RAY`` or
+    ``LIGHTING_RAY``): an image environment, or one colour."""
     if not compat.uses_nodes(world):
         radiance = np.array(world.color[:3], float)
     else:
-        reader = _NodeReader(f"World '{world.name}'", warn)
+        environment = environment_of(world, warn, ray)
+        if environment is not None:
+            return World(environment=environment)
+        tree = world.node_tree
+        constants = (ray, graph_maker(tree, warn))
+        reader = _NodeReader(f"World '{world.name}'", warn, constants=constants)
         out = _active_output(tree, "OUTPUT_WORLD")
         radiance = np.zeros(3) if out is None else \
-            _world_radiance(reader, reader.source(out.inputs.get("Surface")))
+            _world_radiance(reader, decided_source(out.inputs.get("Surface"), *constants))
     if not np.all(np.isfinite(radiance)):
         raise SceneError(f"World '{world.name}': colour {_fmt(radiance)} is not finite")
     if np.any(radiance < 0):
         warn(f"World '{world.name}': negative colour {_fmt(radiance)} clipped to 0")
-    return World(radiance=np.maximum(radiance, 0.0), portals=list(portals))
+    return World(radiance=np.maximum(radiance, 0.0))
+
+
+def _export_world(world, warn: _Warnings, portals=()) -> World:
+    """The scene's World. A world whose nodes read Light Path (Is Camera Ray) is read for
+    camera rays and for the rest: ``World.camera`` holds the first where they differ."""
+    if world is None:
+        return World(portals=list(portals))
+    lighting = _world_for(world, warn, LIGHTING_RAY)
+    camera = None
+    read = light_path_outputs(world.node_tree) if compat.uses_nodes(world) else set()
+    if read:
+        others = sorted(read - {"Is Camera Ray"})
+        if others:
+            warn(f"World '{world.name}': Light Path {', '.join(others)} "
+                 f"{'is' if len(others) == 1 else 'are'} read as 0 for every ray (as for "
+                 "Cycles' light samples); only Is Camera Ray tells rays apart")
+        camera = _world_for(world, warn, CAMERA_RAY)
+        if camera.environment is None and lighting.environment is None \
+                and np.array_equal(camera.radiance, lighting.radiance):
+            camera = None
+    return World(radiance=lighting.radiance, environment=lighting.environment,
+                 portals=list(portals), camera=camera)
 
 
 # ---------------------------------------------------------------------------------------------

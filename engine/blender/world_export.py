@@ -7,7 +7,10 @@ What it computes
     the Background's Strength (a constant) scales the image. Anything else in that chain (a
     Math node on the colour, a Mix, an Object coordinate ...) returns None after a warning
     that names the world and the node: the exporter then keeps the flat colour
-    (``export._export_world``).
+    (``export._export_world``). A Mix Shader or Mix colour node on the way whose factor is
+    exactly 0 or 1 for the ray it is evaluated for passes that input on: a world mixed by
+    Light Path Is Camera Ray is read twice, for camera rays (``CAMERA_RAY``) and for the
+    rest (``LIGHTING_RAY``), and can be an image for one and a colour for the other.
 
     * Environment Texture: its image (packed or a file; float EXR/HDR held as float32, 8-bit
       as uint8 sRGB-encoded, decoded after each look-up as Cycles does), its projection
@@ -35,9 +38,15 @@ import numpy as np
 
 import bpy
 
+from .. import nodes
 from ..environment import Environment, euler_rotation
-from .node_export import image_pixels
+from .node_export import export_graph, image_pixels
 
+# The Light Path values of the two kinds of ray a world is evaluated for (``nodes.evaluate``
+# inputs): a camera ray (``nodes.LIGHT_PATH_CAMERA``), and every other ray (Is Camera Ray 0,
+# the rest 0 too, as Cycles evaluates a world for its light samples).
+CAMERA_RAY: dict = {}
+LIGHTING_RAY = {"ray:Is Camera Ray": np.zeros(1)}
 SKY_BAKE_SIZE = (512, 256)
 SKY_BAKE_SAMPLES = 16
 _IMAGES: dict = {}
@@ -60,6 +69,84 @@ def _source(socket):
     return None
 
 
+def light_path_outputs(tree) -> set:
+    """Names of the Light Path node outputs linked anywhere in ``tree``."""
+    return {s.name for n in tree.nodes if n.type == "LIGHT_PATH" for s in n.outputs
+            if s.is_linked}
+
+
+def _factor(socket, ray, graph_of):
+    """A mix node's factor as one number for a ray of Light Path values ``ray``: its own
+    value, or what the nodes linked to it evaluate to; None when those need more than the
+    ray (a coordinate) or are not supported."""
+    src = _source(socket)
+    if src is None:
+        return float(socket.default_value)
+    try:
+        v = nodes.evaluate(graph_of(), (src[0].name, src[1].identifier), dict(ray), n=1)
+    except (nodes.UnsupportedNode, nodes.MissingInput, KeyError):
+        return None
+    v = np.asarray(v, float)
+    return float(v[0] @ nodes.LUMA if v.ndim == 2 else v[0])
+
+
+def _mix_choice(node, ray, graph_of):
+    """The input a mix node passes on unchanged for ``ray``: a Mix Shader's or a Mix colour
+    node's first input where its factor is exactly 0, its second where the factor is exactly
+    1 and it blends by Mix (Light Path outputs are 0 or 1); None for other nodes and factors."""
+    if node.type == "MIX_SHADER":
+        fac, first, second, blend = node.inputs[0], node.inputs[1], node.inputs[2], "MIX"
+    elif node.type == "MIX" and getattr(node, "data_type", "") == "RGBA" \
+            and getattr(node, "factor_mode", "UNIFORM") == "UNIFORM":
+        by_id = {s.identifier: s for s in node.inputs}
+        fac, first, second = by_id.get("Factor_Float"), by_id.get("A_Color"), by_id.get("B_Color")
+        blend = node.blend_type
+    elif node.type == "MIX_RGB":
+        fac, first, second = node.inputs.get("Fac"), node.inputs.get("Color1"), \
+            node.inputs.get("Color2")
+        blend = node.blend_type
+    else:
+        return None
+    if fac is None or first is None or second is None:
+        return None
+    f = _factor(fac, ray, graph_of)
+    if f == 0.0:
+        return first
+    if f == 1.0 and blend == "MIX":
+        return second
+    return None
+
+
+def graph_maker(tree, warn):
+    """A function that returns ``tree`` as a ``nodes.Graph``, read once when first asked."""
+    graph = []
+
+    def graph_of():
+        if not graph:
+            graph.append(export_graph(tree, warn))
+        return graph[0]
+    return graph_of
+
+
+def decided_socket(socket, ray, graph_of):
+    """The input socket whose value reaches ``socket`` once the mix nodes that ``ray``
+    decides (``_mix_choice``) are passed through: ``socket`` itself, or a mix node's input
+    (its own value when nothing is linked to it)."""
+    for _ in range(64):
+        src = _source(socket)
+        choice = None if src is None else _mix_choice(src[0], ray, graph_of)
+        if choice is None:
+            return socket
+        socket = choice
+    return socket
+
+
+def decided_source(socket, ray, graph_of):
+    """(node, output) feeding ``socket`` once the mix nodes that ``ray`` decides are passed
+    through (``decided_socket``); None when nothing feeds it."""
+    return _source(decided_socket(socket, ray, graph_of))
+
+
 def _output(tree):
     outs = [n for n in tree.nodes if n.type == "OUTPUT_WORLD"]
     for n in outs:
@@ -68,17 +155,25 @@ def _output(tree):
     return outs[0] if outs else None
 
 
-def environment_of(world, warn):
-    """The image environment of ``world`` (module docstring), or None."""
+def environment_of(world, warn, ray=LIGHTING_RAY):
+    """The image environment of ``world`` (module docstring) for a ray of Light Path values
+    ``ray`` (``CAMERA_RAY`` or ``LIGHTING_RAY``): mix nodes whose factor that ray decides (a
+    Light Path output, or a constant 0 or 1) are passed through. None where the world is no
+    image for that ray."""
     tree = getattr(world, "node_tree", None)
     if tree is None:
         return None
+    graph_of = graph_maker(tree, warn)
+
+    def follow(socket):
+        return decided_source(socket, ray, graph_of)
+
     out = _output(tree)
-    src = _source(out.inputs.get("Surface")) if out is not None else None
+    src = follow(out.inputs.get("Surface")) if out is not None else None
     if src is None or src[0].type != "BACKGROUND":
         return None
     background = src[0]
-    colour = _source(background.inputs.get("Color"))
+    colour = follow(background.inputs.get("Color"))
     if colour is None or colour[0].type not in ("TEX_ENVIRONMENT", "TEX_SKY"):
         return None
     tex = colour[0]
