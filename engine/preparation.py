@@ -37,7 +37,7 @@ from .artifacts import Artifacts, scene_fingerprint
 from .gather import RadianceEstimates
 from .indirect import CachedIndirect, CausticEstimate, FinalGather, PhotonEstimate, place_cache
 from .lights import LightSet
-from .photons import (CAUSTIC_PILOT, MIN_CAUSTIC_FLUX, auto_caustic_stored, auto_max_radius, auto_photon_count,
+from .photons import (CAUSTIC_PILOT, MIN_CAUSTIC_FLUX, STRONG_CAUSTIC_PASS, auto_caustic_stored, auto_max_radius, auto_photon_count,
                       build_caustic_map, build_photon_map, caustic_emission_count,
                       specular_share)
 from .plan import Plan, make_plan
@@ -115,8 +115,12 @@ def prepare(scene: Scene, settings: RenderSettings, progress, cancelled,
     report.stage("lights", time.perf_counter() - t0, **lights.describe())
     surfaces = SceneSurfaces(scene)
     if lights.empty and not surfaces.materials.has_emission:
-        report.warn("Scene: no lights, no emissive materials and a black world; the image is "
-                    "black")
+        if scene.world.seen_by_camera.is_black:
+            report.warn("Scene: no lights, no emissive materials and a black world; the image "
+                        "is black")
+        else:
+            report.warn("Scene: no lights, no emissive materials and a world that lights with "
+                        "black; only the world the camera sees shows")
     prep = Prepared(report=report, accel=accel, lights=lights, surfaces=surfaces,
                     pool=ThreadPoolExecutor(settings.worker_count), fingerprint=fingerprint)
     try:
@@ -147,15 +151,17 @@ def _caustics(prep: Prepared, scene, settings, tell, cancelled):
     estimate's radius follows the map's own density (``build_caustic_map``)."""
     report, plan = prep.report, prep.plan
     t0 = time.perf_counter()
-    share, flux_share = specular_share(scene, prep.accel, settings.seed, surfaces=prep.surfaces)
+    share, flux_share, passed = specular_share(scene, prep.accel, settings.seed,
+                                               surfaces=prep.surfaces)
     if not share > 0:
         plan.set("caustics", False, f"no light's photons meet a specular or glass surface "
                                     f"first (a pilot of {CAUSTIC_PILOT:,})")
         return
-    if flux_share < MIN_CAUSTIC_FLUX:
+    if flux_share < MIN_CAUSTIC_FLUX and passed < STRONG_CAUSTIC_PASS:
         plan.set("caustics", False, f"specular and glass surfaces pass on {flux_share:.2%} of "
                                     f"the lights' flux (under {MIN_CAUSTIC_FLUX:.1%}; a pilot "
-                                    f"of {CAUSTIC_PILOT:,}): gather rays take it")
+                                    f"of {CAUSTIC_PILOT:,}), {passed:.0%} of what reaches "
+                                    f"them: gather rays take it")
         return
     full_w, full_h = scene.camera.resolution
     count = caustic_emission_count(auto_caustic_stored(full_w * full_h), share)
@@ -166,7 +172,7 @@ def _caustics(prep: Prepared, scene, settings, tell, cancelled):
                              cancelled=cancelled)
     stats = cmap.stats
     report.stage("caustics", time.perf_counter() - t0, specular_share=round(share, 6),
-                 flux_share=round(flux_share, 6),
+                 flux_share=round(flux_share, 6), passed_share=round(passed, 4),
                  emitted=stats["emitted"], stored=stats["stored"], radius=stats["radius"],
                  bytes=stats["bytes"], cancelled=stats["cancelled"])
     if not stats["radius"] > 0:
