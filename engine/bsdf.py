@@ -122,6 +122,14 @@ class MaterialTable:
         self.glossy = [glossy_material(closures) for closures in self.textures.mean_closures]
         self.camera_glossy = np.array([g is not None for g in self.glossy], bool)
         self.has_glossy = bool(self.camera_glossy.any())
+        # Materials whose glossy or glass lobes a node-driven Mix Shader Fac weighs per hit
+        # (``SurfaceParams.lobe_ratio``), and the closure of each material's specular layer.
+        self.lobe_weighted = self.textures.lobe_weighted & self.camera_glossy
+        self.has_lobe_weights = bool(self.lobe_weighted.any())
+        self.closure_count = max([len(m.closures) for m in scene.materials] + [1])
+        self.lobe_ratio = np.ones((len(self.diffuse), self.closure_count))
+        self.layer_closure = np.array([g.layer.closure if g is not None and g.layer is not None
+                                       else -1 for g in self.glossy], np.int64)
         # Materials with a glass lobe (light passes through them).
         self.transmissive = np.array([g is not None and any(lobe.transmits for lobe in g.lobes)
                                       for g in self.glossy], bool)
@@ -255,7 +263,7 @@ class MaterialTable:
 # sample or a photon leaving an emitter reads no reflectance, a gather ray meeting an
 # emitter no emission texture).
 REFLECTANCE_SLOTS = ("diffuse", "specular", "diffuse_over_pi", "transport_diffuse",
-                     "transport_specular", "translucent")
+                     "transport_specular", "translucent", "lobe_ratio")
 EMISSION_SLOTS = ("exitance", "emitted_radiance")
 TEXTURED_SLOTS = REFLECTANCE_SLOTS + EMISSION_SLOTS
 
@@ -301,17 +309,26 @@ class SurfaceParams:
         diffuse = np.take(table.diffuse, material, axis=0)
         specular = np.take(table.specular, material, axis=0)
         translucent = np.take(table.translucent, material, axis=0)
+        ratio = np.ones((len(material), table.closure_count))
         prim, bu, bv = self.hits
         for material_id, at in self._textured_hits(table.textured_reflectance):
-            diffuse[at], specular[at], translucent[at] = table.textures.reflectance(
-                material_id, prim[at], bu[at], bv[at], with_translucent=True)
+            diffuse[at], specular[at], translucent[at], weights = table.textures.reflectance(
+                material_id, prim[at], bu[at], bv[at], with_translucent=True,
+                with_ratios=True)
+            ratio[at, :weights.shape[1]] = weights
         cache = self._cache
+        cache["lobe_ratio"] = ratio
         cache["diffuse"], cache["specular"] = diffuse, specular
         cache["translucent"] = translucent
         cache["diffuse_over_pi"] = diffuse / np.pi
         cache["transport_diffuse"] = (diffuse * np.take(table.layer_kept, material, axis=0)
                                       + translucent)
-        cache["transport_specular"] = specular + np.take(table.layer_albedo, material, axis=0)
+        layer = np.take(table.layer_albedo, material, axis=0)
+        if table.has_lobe_weights:       # a specular layer mixed in per hit
+            closure = np.take(table.layer_closure, material)
+            mixed = np.flatnonzero(closure >= 0)
+            layer[mixed] *= ratio[mixed, closure[mixed], None]
+        cache["transport_specular"] = specular + layer
 
     def _emission_slots(self) -> None:
         """The ``EMISSION_SLOTS``, as ``_reflectance_slots`` for node-driven emission."""
@@ -338,6 +355,16 @@ class SurfaceParams:
     is_translucent = property(lambda self: self._take("is_translucent"))
     transport_specular = property(lambda self: self._take("transport_specular"))
     is_transport_specular = property(lambda self: self._take("is_transport_specular"))
+
+    @property
+    def lobe_ratio(self):
+        """(N, C) each closure's node-driven Mix Shader weight at the hit over its mean (what
+        the material's lobes were made with: ``GlossyMaterial.lobe_weights``), or None where
+        no material here has one (the lobes' weights are then exact as they are)."""
+        if self.hits is None or not self.table.has_lobe_weights \
+                or not self.table.lobe_weighted[self.material].any():
+            return None
+        return self._take("lobe_ratio")
 
     def replace_diffuse(self, index, diffuse) -> None:
         """Set the diffuse reflectance (k, 3) of the hits ``index`` (and what follows from it:
@@ -482,6 +509,7 @@ class GlossyLobe:
     make_fresnel: object
     multiscatter: bool
     depth: int = 0
+    closure: int = -1           # the material's closure it comes from (``lobe_ratio``)
     transmits = False
 
     @property
@@ -516,6 +544,7 @@ class GlassLobe:
     f0: np.ndarray | None
     multiscatter: bool
     depth: int = 0
+    closure: int = -1
     transmits = True
 
     @property
@@ -540,6 +569,7 @@ class SheenLobe:
     weight: np.ndarray
     roughness: float
     depth: int = 0
+    closure: int = -1
     transmits = False
     sharp = False
     delta = False
@@ -603,12 +633,19 @@ class GlossyMaterial:
             out.append(out[-1] * top.cover(wo, n))
         return out
 
-    def lobe_weights(self, wo, n) -> list:
-        """Each lobe's weight (N, 3) at view directions ``wo``: ``weight`` x the covers above."""
+    def lobe_weights(self, wo, n, ratio=None) -> list:
+        """Each lobe's weight (N, 3) at view directions ``wo``: ``weight`` x the covers above,
+        x ``ratio[:, lobe.closure]`` where given (``SurfaceParams.lobe_ratio`` (N, C): a
+        node-driven Mix Shader Fac's value at each hit over its mean)."""
         if not self.tops:
-            return [np.broadcast_to(lobe.weight, (len(wo), 3)) for lobe in self.lobes]
-        covers = self._covers(wo, n)
-        return [lobe.weight[None, :] * covers[lobe.depth] for lobe in self.lobes]
+            out = [np.broadcast_to(lobe.weight, (len(wo), 3)) for lobe in self.lobes]
+        else:
+            covers = self._covers(wo, n)
+            out = [lobe.weight[None, :] * covers[lobe.depth] for lobe in self.lobes]
+        if ratio is None:
+            return out
+        return [w * ratio[:, lobe.closure, None] if lobe.closure >= 0 else w
+                for w, lobe in zip(out, self.lobes)]
 
     def diffuse_factor(self, wo, n) -> np.ndarray:
         """(N, 3) the share of the diffuse below the layers at view directions ``wo``."""
@@ -618,9 +655,10 @@ class GlossyMaterial:
             out = out * np.clip(1.0 - albedo.max(axis=1), 0.0, 1.0)[:, None]
         return out
 
-    def entries(self, count: int, wo, n, front=None) -> list:
-        """[(weight (N, 3), lobe at the hits, delta)] for ``count`` hits."""
-        weights = self.lobe_weights(wo, n)
+    def entries(self, count: int, wo, n, front=None, ratio=None) -> list:
+        """[(weight (N, 3), lobe at the hits, delta)] for ``count`` hits (``ratio``: see
+        ``lobe_weights``)."""
+        weights = self.lobe_weights(wo, n, ratio)
         return [(w, lobe.at(count, front), lobe.delta) for w, lobe in zip(weights, self.lobes)]
 
 
@@ -754,9 +792,10 @@ def glossy_material(closures) -> GlossyMaterial | None:
     there are none.
     Diffuse, emission and the rest stay with the seed's reduction (``shaders.seed_reduction``)."""
     lobes, layer, tops = [], None, []
-    for c in closures:
+    for index, c in enumerate(closures):
         if not np.any(c.weight > 0):
             continue
+        first = len(lobes)
         p = c.params
         multiscatter = c.distribution in ("MULTI_GGX", "")
         if c.kind == "principled":
@@ -814,6 +853,8 @@ def glossy_material(closures) -> GlossyMaterial | None:
             # reflects nothing (Cycles' Transparent BSDF; Principled Alpha < 1 mixes one in).
             lobes.append(GlassLobe(c.weight.copy(), 0.0, 1.0, np.zeros(3),
                                    np.clip(p["color"], 0, None).copy(), None, False))
+        for lobe in lobes[first:]:
+            lobe.closure = index
     if not lobes:
         return None
     return GlossyMaterial(lobes, layer, tops)
@@ -884,17 +925,18 @@ def layer_diffuse_factor(table: MaterialTable, material_ids, wo, n) -> np.ndarra
     return out
 
 
-def reflection_albedo(table: MaterialTable, material_ids, wo, n) -> np.ndarray:
+def reflection_albedo(table: MaterialTable, material_ids, wo, n, ratio=None) -> np.ndarray:
     """(N, 3) the summed directional albedo of each hit's glossy reflection lobes (glass lobes
     left out; sheen and coat with the covers above the lobes below) at view directions
-    ``wo``: 0 where the material has none."""
+    ``wo``: 0 where the material has none. ``ratio``: ``SurfaceParams.lobe_ratio`` rows."""
     out = np.zeros((len(material_ids), 3))
     for material_id in np.unique(material_ids):
         spec = table.glossy[material_id]
         if spec is None:
             continue
         hits = np.flatnonzero(material_ids == material_id)
-        for w, lobe, _delta in spec.entries(len(hits), wo[hits], n[hits]):
+        rows = None if ratio is None else ratio[hits]
+        for w, lobe, _delta in spec.entries(len(hits), wo[hits], n[hits], ratio=rows):
             if not hasattr(lobe, "albedo_split"):
                 out[hits] += w * lobe.albedo(wo[hits], n[hits])
     return out
@@ -910,7 +952,7 @@ def lobe_shares(lobes, wo, n) -> np.ndarray:
 
 
 def sample_glossy(table: MaterialTable, material_ids, wo, n, rng, front=None,
-                  with_delta: bool = False):
+                  with_delta: bool = False, ratio=None):
     """One direction per hit on materials with glossy lobes (``table.glossy``), in the hits'
     order, grouped by material: a lobe picked in proportion to the largest channel of its
     weight x albedo(wo) (the weight with the covers of the layers above it;
@@ -920,7 +962,8 @@ def sample_glossy(table: MaterialTable, material_ids, wo, n, rng, front=None,
     multiple importance sampling weighs it by. ``wo``, ``n`` (N, 3) float64, ``n`` on wo's
     side; ``front`` (N,) whether each hit is on the front face (glass refracts into the
     object there; None: all are). ``with_delta``: also return delta (N,), whether the picked
-    lobe is a delta (a mirror or smooth glass)."""
+    lobe is a delta (a mirror or smooth glass). ``ratio``: the hits' ``SurfaceParams.
+    lobe_ratio`` (per-hit Mix Shader weights of the lobes; None: their means)."""
     count = len(material_ids)
     wi_out = np.zeros((count, 3))
     weight_out = np.zeros((count, 3))
@@ -933,7 +976,8 @@ def sample_glossy(table: MaterialTable, material_ids, wo, n, rng, front=None,
             continue
         side = None if front is None else front[hits]
         wo_h, n_h = wo[hits], n[hits]
-        lobes = spec.entries(len(hits), wo_h, n_h, side)
+        lobes = spec.entries(len(hits), wo_h, n_h, side,
+                             None if ratio is None else ratio[hits])
         shares = lobe_shares([(w, lobe) for w, lobe, _ in lobes], wo_h, n_h)
         total = shares.sum(axis=1)
         cdf = np.cumsum(shares, axis=1)

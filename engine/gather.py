@@ -313,10 +313,11 @@ def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfa
             # mirrored.
             glossy = np.flatnonzero(surface.camera_glossy[idx])
             if len(glossy):
+                ratio = surface.lobe_ratio
                 g_dirs, g_weight, _pdf = sample_glossy(
                     surfaces.materials, surface.material[idx[glossy]],
                     -incoming[glossy].astype(np.float64), nm[glossy].astype(np.float64), rng,
-                    ~facing[idx[glossy]])
+                    ~facing[idx[glossy]], ratio=None if ratio is None else ratio[idx[glossy]])
                 dirs = dirs.astype(np.float64)
                 weight = weight.astype(np.float64)
                 dirs[glossy], weight[glossy] = g_dirs, g_weight

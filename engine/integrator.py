@@ -451,8 +451,9 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
                 if materials.has_layer:
                     rho = rho * layer_diffuse_factor(materials, surface.material[met], wo_met,
                                                      n_met)
-                rho = rho + reflection_albedo(materials, surface.material[met], wo_met,
-                                              n_met) / np.pi
+                ratio = surface.lobe_ratio
+                rho = rho + reflection_albedo(materials, surface.material[met], wo_met, n_met,
+                                              None if ratio is None else ratio[met]) / np.pi
                 value = photon.surface_irradiance(x[met], ng[met]) * rho * thr[met]
                 if materials.has_translucent:
                     value += (photon.surface_irradiance(x[met], -ng[met]) * thr[met]
@@ -979,6 +980,8 @@ class _GlossyHits:
         self.wo, self.n = wo, n
         self.materials = materials
         self.material_ids = surface.material[self.index]
+        # (N, C) per-hit Mix Shader weights of the lobes over their means, or None
+        self.ratio = surface.lobe_ratio
         # (hits (k,) into the vertex, [(weight (k, 3), lobe, delta)], lobe shares (k, J))
         self.groups = []
         self.group_of = np.full(count, -1)
@@ -990,7 +993,8 @@ class _GlossyHits:
             self.row_of[hits] = np.arange(len(hits))
             spec = materials.glossy[material_id]
             wo_h, n_h = wo[hits].astype(np.float64), n[hits].astype(np.float64)
-            lobes = spec.entries(len(hits), wo_h, n_h, self.front[hits])
+            lobes = spec.entries(len(hits), wo_h, n_h, self.front[hits],
+                                 None if self.ratio is None else self.ratio[hits])
             if spec.layered:
                 self.diffuse_factor[hits] = spec.diffuse_factor(wo_h, n_h)
             albedo = sum(w * lobe.albedo(wo_h, n_h) for w, lobe, _ in lobes)
@@ -1019,7 +1023,9 @@ class _GlossyHits:
         wi, weight, pdf = sample_glossy(self.materials, self.material_ids,
                                         self.wo[self.index].astype(np.float64),
                                         self.n[self.index].astype(np.float64), rng,
-                                        self.front[self.index])
+                                        self.front[self.index],
+                                        ratio=None if self.ratio is None
+                                        else self.ratio[self.index])
         return wi, weight, np.any(weight > 0, axis=1) & (pdf > 0), pdf
 
     def radiance(self, target, directions, p_light=None, meets=None):

@@ -39,14 +39,16 @@ weights 1 - u - v, u, v, as ``surfaces.SceneSurfaces.normals`` uses them) and ha
 A Mix Shader's node-driven Fac is a per-hit factor on the weights of the closures below it
 (``Closure.textures[WEIGHT]``: Fac for the second shader, 1 - Fac, ``COMPLEMENT``, for the
 first; :func:`weight_at`); export's static material takes the socket's own value
-(:func:`default_weight`).
+(:func:`default_weight`). The lobes (glossy, metal, glass, sheen, a Principled BSDF's) are
+made once per material with the weight's mean and scaled at each hit by the weight there
+over that mean (``with_ratios``).
 
 What follows the texture at each hit, and what takes its mean
     The diffuse reflectance (camera shading, the photons' stored power and roulette, gather
     rays, the cache's records: all read ``bsdf.SurfaceParams.diffuse`` at their own hit), the
-    specular share of the roulette and the exitance seen by rays follow the texture exactly.
-    The glossy and glass lobes (their roughness, Fresnel, tints) use the mean of their
-    node-driven inputs, and emissive meshes are sampled as lights by their mean exitance;
+    specular share of the roulette, the exitance seen by rays and the Mix Shader weights of
+    every lobe follow the texture exactly. The glossy and glass lobes' own parameters (their
+    roughness, Fresnel, tints) use the mean of their node-driven inputs, and emissive meshes are sampled as lights by their mean exitance;
     export names every such input in a warning (:func:`approximations`).
 
 Conversions follow Cycles: a colour feeding a number by its luminance (``nodes.LUMA``), a
@@ -105,8 +107,9 @@ def interpolate_corners(corner: np.ndarray, prim, bu, bv) -> np.ndarray:
 # constant)`` for 1 - Fac; ``constant`` the socket's own value, export's static guess).
 WEIGHT = "weight"
 COMPLEMENT = "complement"
-# Closure kinds whose per-hit weight is rendered exactly (their whole contribution is the
-# seed's rho_d or M at the hit); the others' lobes take the weight's mean.
+# Closure kinds whose per-hit weight is all in the seed's rho_d, rho_t or M at the hit; the
+# others' lobes are scaled per hit by the weight over its mean (``MaterialTextures.
+# reflectance(with_ratios=True)``, ``bsdf.SurfaceParams.lobe_ratio``).
 WEIGHT_EXACT_KINDS = ("diffuse", "emission", "translucent")
 
 # Per-triangle attributes among ``Scene.corner_attributes``: taken, not interpolated.
@@ -263,10 +266,6 @@ def approximations(closures) -> list[str]:
     input): inputs of glossy and glass lobes take their mean over the surface."""
     out = []
     for c in closures:
-        if WEIGHT in c.textures and c.kind not in WEIGHT_EXACT_KINDS:
-            out.append(f"'{c.node}' is mixed in by a node-driven Mix Shader Fac; its "
-                       f"{c.kind} lobes take the mixed weight's mean over the surface (per-hit "
-                       "weights reach the diffuse, the emission and the roulette only)")
         for param in c.textures:
             if param == WEIGHT or (c.kind, param) in EXACT_PARAMS:
                 continue
@@ -294,6 +293,11 @@ class MaterialTextures:
         self.graphs = [getattr(m, "graph", None) for m in scene.materials]
         self.textured = np.array([g is not None and any(c.textures for c in m.closures)
                                   for m, g in zip(scene.materials, self.graphs)], bool)
+        # Materials with a lobe-bearing closure (not ``WEIGHT_EXACT_KINDS``) that a
+        # node-driven Mix Shader Fac weighs per hit.
+        self.lobe_weighted = np.array([t and any(WEIGHT in c.textures and c.kind not in
+                                                 WEIGHT_EXACT_KINDS for c in m.closures)
+                                       for m, t in zip(scene.materials, self.textured)], bool)
         self.any = bool(self.textured.any())
         self.mean_closures = [tuple(m.closures) for m in scene.materials]
         self.mean_reduction = {}
@@ -345,21 +349,35 @@ class MaterialTextures:
         diffuse, specular = self.reflectance(material_id, prim, bu, bv)
         return diffuse, specular, self.exitance(material_id, prim, bu, bv)
 
-    def reflectance(self, material_id: int, prim, bu, bv, with_translucent: bool = False):
+    def reflectance(self, material_id: int, prim, bu, bv, with_translucent: bool = False,
+                    with_ratios: bool = False):
         """(diffuse, specular) (k, 3) of :meth:`reduction` alone: only the node-driven inputs
         that they read are evaluated (an emission texture is not); ``with_translucent``: also
         the translucent closures' rho_t (``shaders.SeedMaterial.translucent``). Where
-        rho_d + rho_s + rho_t exceeds 1 in a channel, all three are scaled down together."""
+        rho_d + rho_s + rho_t exceeds 1 in a channel, all three are scaled down together.
+        ``with_ratios``: also (k, C) each closure's weight at the hit over its weight in
+        ``mean_closures`` (1 for closures without a node-driven weight; 0 where the mean is
+        0), by which its glossy and glass lobes are scaled per hit."""
         n = len(prim)
-        seed = seed_reduction(self.closures_at(material_id, prim, bu, bv, "reflectance"))
+        closures = self.closures_at(material_id, prim, bu, bv, "reflectance")
+        seed = seed_reduction(closures)
         diffuse, specular, translucent = (np.maximum(np.broadcast_to(x, (n, 3)), 0.0)
                                           for x in (seed.diffuse, seed.specular,
                                                     seed.translucent))
         total = (diffuse + specular + translucent).max(axis=1, keepdims=True)
         scale = 1.0 / np.maximum(total, 1.0)
+        out = (diffuse * scale, specular * scale)
         if with_translucent:
-            return diffuse * scale, specular * scale, translucent * scale
-        return diffuse * scale, specular * scale
+            out += (translucent * scale,)
+        if with_ratios:
+            ratios = np.ones((n, len(closures)))
+            for j, (c, mean) in enumerate(zip(closures, self.mean_closures[material_id])):
+                if WEIGHT in self.scene.materials[material_id].closures[j].textures:
+                    top = float(np.max(mean.weight))
+                    hit = np.broadcast_to(c.weight, (n, 3)).max(axis=1)
+                    ratios[:, j] = hit / top if top > 0 else 0.0
+            out += (ratios,)
+        return out
 
     def exitance(self, material_id: int, prim, bu, bv):
         """The exitance (k, 3) of :meth:`reduction` alone (what emitters and photons leaving

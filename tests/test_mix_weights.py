@@ -77,14 +77,31 @@ def test_mix_fac_follows_its_texture_as_cycles(kind, tmp_path):
     assert _worst(kind, tmp_path) < BOUND
 
 
-def test_glossy_lobe_under_a_driven_mix_is_named():
-    """A glossy lobe mixed in by a texture takes the weight's mean, and export says so."""
+def test_glossy_lobe_under_a_driven_mix_is_weighed_per_hit():
+    """A glossy lobe mixed in by a texture: no warning, and at each hit its weight over the
+    surface's mean (``SurfaceParams.lobe_ratio``) is the Checker's Fac there (0 or 1) over
+    that Fac's mean, and the diffuse's (1 - Fac) over its mean (its weight is in rho_d)."""
     from lanterna.engine.blender.export import export_scene
+    from lanterna.engine.bsdf import MaterialTable
 
     _build("lit")
     tree = bpy.data.materials["Mixed"].node_tree
     glossy = tree.nodes.new("ShaderNodeBsdfGlossy")
     tree.links.new(glossy.outputs[0], tree.nodes["Mix Shader"].inputs[2])
     exported = export_scene(bpy.context.evaluated_depsgraph_get())
-    assert any("Glossy BSDF" in w and "Mix Shader Fac" in w for w in exported.warnings), \
-        exported.warnings
+    assert not exported.warnings, exported.warnings
+    table = MaterialTable(exported)
+    assert table.lobe_weighted.tolist() == [True]
+    rng = np.random.default_rng(4)
+    prim = rng.integers(0, len(exported.triangles), 2000)
+    bu, bv = rng.random(2000) * 0.5, rng.random(2000) * 0.5
+    ratio = table.at(np.zeros(2000, np.int64), prim, bu, bv).lobe_ratio
+    kinds = [c.kind for c in exported.materials[0].closures]
+    glossy_ratio, diffuse_ratio = ratio[:, kinds.index("glossy")], ratio[:, kinds.index("diffuse")]
+    on = glossy_ratio > 0
+    assert 0.3 < on.mean() < 0.7
+    np.testing.assert_array_equal(diffuse_ratio[on], 0.0)
+    assert np.all(diffuse_ratio[~on] > 1.7)
+    # The squares with Fac 1 all share one ratio, 1 / mean(Fac), about 2 for a checker.
+    np.testing.assert_allclose(glossy_ratio[on], glossy_ratio[on][0])
+    assert 1.7 < glossy_ratio[on][0] < 2.3

@@ -28,9 +28,11 @@ animation already applied by Blender) and turns it into the renderer's inert sce
 
   - Principled BSDF: rho_d = Base Color (1 - Metallic)(1 - Transmission Weight),
     rho_s = Base Color x Metallic (a perfect mirror, whatever the Roughness), exitance
-    M = pi x Emission Color x Emission Strength. The dielectric specular layer (about 4 % at
-    IOR 1.5), coat, sheen and transmission are neglected (non-zero coat, sheen, transmission
-    and Alpha < 1 are reported). Blender 5 defaults: Emission Color white, Strength 0.
+    M = pi x Emission Color x Emission Strength, for the seed's reduction; the dielectric
+    layer, metal, coat, sheen and transmission render as lobes (``bsdf.glossy_material``).
+    Alpha < 1 mixes a Transparent BSDF in, as Cycles does; an Alpha driven by nodes (an
+    image's alpha) mixes it per hit, as a node-driven Mix Shader Fac. Blender 5 defaults:
+    Emission Color white, Strength 0.
   - Diffuse BSDF: rho_d = Color. Emission: M = pi x Color x Strength, rho_d = 0.
   - Glossy BSDF: rho_s = Color. Metallic BSDF: rho_s = Base Color (F82 mode) or the
     normal-incidence Fresnel reflectance ((n-1)^2 + k^2) / ((n+1)^2 + k^2) per channel.
@@ -844,6 +846,15 @@ class _NodeReader:
         if t == "BSDF_PRINCIPLED":
             principled = self._principled(node)
             alpha = principled.params["alpha"]
+            factors = principled.textures.get("alpha", ())
+            if len(factors) == 1 and factors[0][0] is not None:
+                # An Alpha driven by nodes (an image's alpha): Cycles mixes the Transparent
+                # BSDF in per hit, as a Mix Shader whose Fac is the Alpha (clamped to [0, 1]).
+                socket = tuple(principled.textures.pop("alpha")[0][0])
+                principled.params["alpha"] = 1.0
+                clear = Closure("transparent", params={"color": np.ones(3)}, node=node.name)
+                return [_weighted(principled, socket, alpha),
+                        _weighted(clear, socket + (textures.COMPLEMENT,), 1.0 - alpha)]
             if alpha < 1 and "alpha" not in principled.textures:
                 # Cycles: Alpha mixes a Transparent BSDF in, (1 - Alpha) of the light.
                 principled.params["alpha"] = 1.0

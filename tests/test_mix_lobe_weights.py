@@ -1,0 +1,132 @@
+"""A Mix Shader whose Fac is a texture weighs glossy, metal and glass lobes per hit (issue 23).
+
+Before, the diffuse, the emission and the photons' roulette followed a node-driven Fac per
+hit, but the glossy and glass lobes took the weight's mean over the surface: a checker of
+diffuse and polished squares showed the highlight at half strength on every square. Now each
+closure's lobes are scaled by its weight at the hit over that mean
+(``SurfaceParams.lobe_ratio``), at camera hits, in the photons' glossy bounces, on gather rays
+and on the probes of ending glossy paths.
+
+The scene: a 4 m plane whose material mixes two shaders by a Checker texture (4 squares a
+side) under a 1 m area light in front of the camera, so that the highlight spans several
+squares; the world is dim grey. Two materials:
+
+* ``glossy``: Mix(Diffuse 0.8, Glossy GGX roughness 0.25 of colour (0.9, 0.6, 0.3));
+* ``metal``: Mix(Principled red (the dielectric layer over a diffuse), Principled copper
+  metal roughness 0.3);
+* ``alpha``: a Principled BSDF (red, roughness 0.3) whose Alpha is the Checker, over a blue
+  emitting ground (radiance (0.2, 0.4, 1)) that the clear squares show: Cycles mixes a
+  Transparent BSDF in by 1 - Alpha per hit. Before, a node-driven Alpha was ignored
+  (rendered opaque, with a warning).
+
+Each renders at ``final``'s settings but 64 samples a pixel (at 16 the highlight regions'
+noise is 1.3 %: their worst was 2.5 % at seeds 1-3, the sign changing with the seed),
+against inline Cycles (2048 spp), compared per 4 x 4 region (luminance): the worst region
+0.50 / 1.04 / 0.79 % (glossy), 0.64 / 0.40 / 0.71 % (metal) and 0.30 / 0.37 / 0.19 % (alpha)
+at seeds 1-3. With the lobes at their mean weight it is 129 % (glossy) and 190 % (metal)
+off; with the Alpha ignored, 96 %.
+"""
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+from inline_cycles import cycles_image, node_material  # noqa: E402
+
+CASES = ("glossy", "metal", "alpha")
+CYCLES_SAMPLES = 2048
+SAMPLES = 64
+BOUND = 0.025
+LUMA = np.array([0.2126, 0.7152, 0.0722])
+
+
+def _material(kind: str):
+    mat, tree, out = node_material(bpy, f"Checker {kind}")
+    checker = tree.nodes.new("ShaderNodeTexChecker")
+    checker.inputs["Scale"].default_value = 4.0
+    checker.inputs["Color1"].default_value = (1.0, 1.0, 1.0, 1.0)
+    checker.inputs["Color2"].default_value = (0.0, 0.0, 0.0, 1.0)
+    mix = tree.nodes.new("ShaderNodeMixShader")
+    tree.links.new(checker.outputs["Fac"], mix.inputs[0])
+    if kind == "alpha":
+        leaf = tree.nodes.new("ShaderNodeBsdfPrincipled")
+        leaf.inputs["Base Color"].default_value = (0.6, 0.05, 0.03, 1.0)
+        leaf.inputs["Roughness"].default_value = 0.3
+        tree.links.new(checker.outputs["Fac"], leaf.inputs["Alpha"])
+        tree.links.new(leaf.outputs[0], out.inputs["Surface"])
+        return mat
+    if kind == "glossy":
+        first = tree.nodes.new("ShaderNodeBsdfDiffuse")
+        first.inputs["Color"].default_value = (0.8, 0.8, 0.8, 1.0)
+        second = tree.nodes.new("ShaderNodeBsdfGlossy")
+        second.inputs["Color"].default_value = (0.9, 0.6, 0.3, 1.0)
+        second.inputs["Roughness"].default_value = 0.25
+    else:
+        first = tree.nodes.new("ShaderNodeBsdfPrincipled")
+        first.inputs["Base Color"].default_value = (0.6, 0.05, 0.03, 1.0)
+        second = tree.nodes.new("ShaderNodeBsdfPrincipled")
+        second.inputs["Base Color"].default_value = (0.955, 0.638, 0.538, 1.0)
+        second.inputs["Metallic"].default_value = 1.0
+        second.inputs["Roughness"].default_value = 0.3
+    tree.links.new(first.outputs[0], mix.inputs[1])
+    tree.links.new(second.outputs[0], mix.inputs[2])
+    tree.links.new(mix.outputs[0], out.inputs["Surface"])
+    return mat
+
+
+def _scene(kind: str):
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.resolution_x, scene.render.resolution_y = 64, 48
+    bpy.ops.mesh.primitive_plane_add(size=4.0)
+    bpy.context.object.data.materials.append(_material(kind))
+    if kind == "alpha":
+        bpy.ops.mesh.primitive_plane_add(size=40.0, location=(0.0, 0.0, -0.5))
+        glow, tree, out = node_material(bpy, "Blue ground")
+        emission = tree.nodes.new("ShaderNodeEmission")
+        emission.inputs["Color"].default_value = (0.2, 0.4, 1.0, 1.0)
+        tree.links.new(emission.outputs[0], out.inputs["Surface"])
+        bpy.context.object.data.materials.append(glow)
+    light = bpy.data.objects.new("Light", bpy.data.lights.new("Light", "AREA"))
+    light.data.energy = 150.0
+    light.data.size = 1.0
+    light.location = (0.0, 1.6, 1.6)
+    light.rotation_euler = (-np.pi / 4, 0.0, 0.0)
+    scene.collection.objects.link(light)
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    cam.location = (0.0, -3.2, 2.6)
+    cam.rotation_euler = (np.radians(52.0), 0.0, 0.0)
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    world = bpy.data.worlds.new("Dim")
+    if world.node_tree is None:
+        world.use_nodes = True
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.05, 0.05, 0.05, 1)
+    scene.world = world
+    return scene
+
+
+def _regions(image):
+    h, w = image.shape[:2]
+    return (image @ LUMA).reshape(4, h // 4, 4, w // 4).mean(axis=(1, 3))
+
+
+def worst_region_error(kind: str, tmp_path, seed: int = 1) -> float:
+    from lanterna.engine.blender.export import export_scene
+    from lanterna.engine.pipeline import RenderSettings, render
+    from lanterna.engine.settings import PRESETS
+
+    scene = _scene(kind)
+    exported = export_scene(bpy.context.evaluated_depsgraph_get())
+    assert not any("mean" in w or "Alpha" in w for w in exported.warnings), exported.warnings
+    settings = RenderSettings(**{**PRESETS["final"], "samples": SAMPLES, "seed": seed})
+    ours = np.asarray(render(exported, settings).image)
+    assert np.all(np.isfinite(ours))
+    cycles = cycles_image(bpy, scene, tmp_path, CYCLES_SAMPLES)
+    a, b = _regions(ours), _regions(cycles)
+    return float(np.max(np.abs(a / b - 1.0)))
+
+
+@pytest.mark.parametrize("kind", CASES)
+def test_lobes_mixed_by_a_texture_follow_it_per_hit(kind, tmp_path):
+    assert worst_region_error(kind, tmp_path) <= BOUND
