@@ -250,12 +250,15 @@ class MaterialTable:
                                               (aa * pb - ab * pa) * inv], axis=1)
         return out
 
-    def at(self, material_ids: np.ndarray, prim=None, bu=None, bv=None) -> "SurfaceParams":
+    def at(self, material_ids: np.ndarray, prim=None, bu=None, bv=None,
+           directions=None) -> "SurfaceParams":
         """The parameters at hits on triangles of ``material_ids`` (N,): the one function
         through which every stage reads a material. ``prim`` (N,) the triangles and (bu, bv)
         the barycentrics of the hits: textured materials read their per-hit values there
-        (without them, their means over the surface)."""
-        return SurfaceParams(self, np.asarray(material_ids), prim, bu, bv)
+        (without them, their means over the surface); ``directions`` (N, 3) the rays'
+        (camera, gather, photon), for inputs that read the view (Fresnel, Layer Weight,
+        Geometry: ``textures.MaterialTextures.view_at``)."""
+        return SurfaceParams(self, np.asarray(material_ids), prim, bu, bv, directions)
 
 
 # SurfaceParams slots that textures make per-hit (the rest stay per material): those of the
@@ -275,11 +278,13 @@ class SurfaceParams:
     ``exitance``, each part evaluated when one of its slots is first read)."""
 
     def __init__(self, table: MaterialTable, material: np.ndarray, prim=None, bu=None,
-                 bv=None):
+                 bv=None, directions=None):
         self.table = table
         self.material = material            # (N,) material ids (per-material fast paths)
         self.hits = None if prim is None or not table.textures.any else (
             np.asarray(prim), np.asarray(bu), np.asarray(bv))
+        self.directions = None if directions is None or self.hits is None \
+            or not table.textures.view_inputs.any() else np.asarray(directions)
         self._cache = {}
 
     def __len__(self):
@@ -302,6 +307,14 @@ class SurfaceParams:
         for material_id in np.unique(material[textured[material]]):
             yield int(material_id), np.flatnonzero(material == material_id)
 
+    def _view(self, material_id: int, at):
+        """The view of hits ``at`` on ``material_id`` where its inputs read it, else None."""
+        if not self.table.textures.view_inputs[material_id]:
+            return None
+        prim, bu, bv = self.hits
+        return self.table.textures.view_at(
+            prim[at], bu[at], bv[at], None if self.directions is None else self.directions[at])
+
     def _reflectance_slots(self) -> None:
         """The ``REFLECTANCE_SLOTS``: the per-material rows, with the rows of hits on
         materials whose reflectance is node-driven replaced by their per-hit values."""
@@ -314,7 +327,7 @@ class SurfaceParams:
         for material_id, at in self._textured_hits(table.textured_reflectance):
             diffuse[at], specular[at], translucent[at], weights = table.textures.reflectance(
                 material_id, prim[at], bu[at], bv[at], with_translucent=True,
-                with_ratios=True)
+                with_ratios=True, hit_values=self._view(material_id, at))
             ratio[at, :weights.shape[1]] = weights
         cache = self._cache
         cache["lobe_ratio"] = ratio
@@ -336,7 +349,8 @@ class SurfaceParams:
         exitance = np.take(table.exitance, material, axis=0)
         prim, bu, bv = self.hits
         for material_id, at in self._textured_hits(table.textured_emission):
-            exitance[at] = table.textures.exitance(material_id, prim[at], bu[at], bv[at])
+            exitance[at] = table.textures.exitance(material_id, prim[at], bu[at], bv[at],
+                                                   self._view(material_id, at))
         self._cache["exitance"] = exitance
         self._cache["emitted_radiance"] = exitance / np.pi
 
@@ -385,6 +399,7 @@ class SurfaceParams:
         out = SurfaceParams(self.table, self.material[index])
         if self.hits is not None:
             out.hits = tuple(h[index] for h in self.hits)
+            out.directions = None if self.directions is None else self.directions[index]
             out._cache = {k: v[index] for k, v in self._cache.items() if k in TEXTURED_SLOTS}
         return out
 

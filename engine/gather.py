@@ -271,7 +271,7 @@ def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfa
         ng = surfaces.geometric_normals[prim].astype(np.float64)
         facing = np.einsum("ij,ij->i", ng, dirs) > 0
         ng[facing] *= -1                                   # towards the gather ray
-        surface = surfaces.params(prim, bu, bv)
+        surface = surfaces.params(prim, bu, bv, dirs)
         if bounce > 0 and mirrored_emission and surfaces.materials.has_emission:
             # An emitter seen in a mirror is indirect light at the gather point (its direct
             # light is the emitters it sees straight): counted here, or it was lost.

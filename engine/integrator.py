@@ -416,7 +416,7 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
         x = sampling.scale_rows(d, t_hit)
         x += o
         ng, ns, front = surfaces.normals(prim, bu, bv, d)
-        surface = surfaces.params(prim, bu, bv)
+        surface = surfaces.params(prim, bu, bv, d)
         if depth == 0 and not materials.constant_per_material:
             t0 = time.perf_counter()
             supersample_textures(context, camera, batch, surface, prim, rays, spp, stats)
@@ -672,7 +672,7 @@ def _seen_emission(scene, accel, surfaces, origins, directions, tmax, split=Fals
         p = prim[hit]
         front = sampling.dot_rows(np.take(surfaces.geometric_normals, p, axis=0),
                                   directions[hit]) < 0
-        surface = surfaces.params(p, bu[hit], bv[hit])
+        surface = surfaces.params(p, bu[hit], bv[hit], directions[hit])
         out[hit] = surface.emitted_radiance * (front | surface.both_sides)[:, None]
     if split:
         return out, np.where(hit[:, None], 0.0, out)
@@ -706,7 +706,7 @@ def supersample_textures(context: CameraContext, camera, batch: int, surface, pr
     total = np.array(surface.diffuse[textured], np.float64)
     counts = np.ones(len(textured))
     if same.any():
-        extra = context.surfaces.params(p2[same], u2[same], v2[same]).diffuse
+        extra = context.surfaces.params(p2[same], u2[same], v2[same], directions[same]).diffuse
         slot = np.searchsorted(textured, owner[same])
         np.add.at(total, slot, extra)
         counts += np.bincount(slot, minlength=len(textured))

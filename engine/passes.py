@@ -190,7 +190,7 @@ def centre_hits(scene, accel, surfaces) -> CentreHits:
     t_hit, prim, bu, bv, d = t_hit[hit], prim[hit], bu[hit], bv[hit], directions[hit]
     x = origins[hit] + t_hit[:, None] * d
     ng, ns, _front = surfaces.normals(prim, bu, bv, d)
-    surface = surfaces.params(prim, bu, bv)
+    surface = surfaces.params(prim, bu, bv, d)
     return CentreHits(pixel=hit, x=x, ns=ns, ng=ng, surface=surface,
                       diffuse=surface.is_diffuse, shape=(height, width))
 

@@ -693,7 +693,7 @@ def trace_photons(scene: Scene, accel, emitted: EmittedPhotons, rng: np.random.G
         flip = sampling.dot_rows(n, d) > 0                 # turn n towards the photon
         if flip.any():
             n[flip] *= -1
-        surface = surfaces.params(prim, bu, bv)
+        surface = surfaces.params(prim, bu, bv, d)
         if caustic:
             # Caustic paths: the first hit must be specular; diffuse stores need a specular
             # bounce before them.

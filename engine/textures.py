@@ -112,6 +112,11 @@ COMPLEMENT = "complement"
 # reflectance(with_ratios=True)``, ``bsdf.SurfaceParams.lobe_ratio``).
 WEIGHT_EXACT_KINDS = ("diffuse", "emission", "translucent")
 
+# Nodes whose outputs depend on the hit's view and world-space geometry (``nodes`` module
+# docstring: "incoming", "normal_world", ...): materials whose inputs read them are evaluated
+# with the hit's own ray (``MaterialTextures.view_at``).
+VIEW_NODES = ("ShaderNodeFresnel", "ShaderNodeLayerWeight", "ShaderNodeNewGeometry")
+
 # Per-triangle attributes among ``Scene.corner_attributes``: taken, not interpolated.
 PER_TRIANGLE = ("normal_matrix",)
 
@@ -232,6 +237,20 @@ def _upstream(graph, node: str) -> set:
     return seen
 
 
+def _reads_view(material, graph) -> bool:
+    """Whether any node-driven input of ``material`` reads a ``VIEW_NODES`` node."""
+    if graph is None:
+        return False
+    upstream = set()
+    for c in material.closures:
+        for factors in c.textures.values():
+            for socket, _constant in factors:
+                if socket is not None:
+                    upstream |= _upstream(graph, socket[0])
+    return any(name in graph.nodes and graph.nodes[name].type in VIEW_NODES
+               for name in upstream)
+
+
 def lookups_per_hit(material) -> tuple[int, int]:
     """(reflectance, emission): the image look-ups one per-hit evaluation of the material's
     node-driven (rho_d, rho_s) and M makes (``MaterialTextures.reflectance`` /
@@ -298,11 +317,41 @@ class MaterialTextures:
         self.lobe_weighted = np.array([t and any(WEIGHT in c.textures and c.kind not in
                                                  WEIGHT_EXACT_KINDS for c in m.closures)
                                        for m, t in zip(scene.materials, self.textured)], bool)
+        # Materials whose node-driven inputs read the view (``VIEW_NODES``).
+        self.view_inputs = np.array([t and _reads_view(m, g) for m, g, t in
+                                     zip(scene.materials, self.graphs, self.textured)], bool)
         self.any = bool(self.textured.any())
         self.mean_closures = [tuple(m.closures) for m in scene.materials]
         self.mean_reduction = {}
         for material_id in np.flatnonzero(self.textured):
             self._means(int(material_id))
+
+    def view_at(self, prim, bu, bv, directions=None) -> dict:
+        """The world-space hit values ``VIEW_NODES`` read at hits (prim, bu, bv) of rays
+        travelling along ``directions`` (N, 3) (Cycles' shader data: the normals turned to
+        the side the ray arrives from, ``incoming`` = -direction, ``backfacing`` 1 on the
+        back side). Without directions the view is along the normal (normal incidence: what
+        a cache record, a light sample of an emitter and the surface means read)."""
+        scene = self.scene
+        tri = np.take(scene.triangles, prim, axis=0).astype(np.float64)
+        bu, bv = np.asarray(bu, np.float64), np.asarray(bv, np.float64)
+        weights = np.stack([1.0 - bu - bv, bu, bv], axis=1)
+        position = np.einsum("nk,nkj->nj", weights, tri)
+        ng = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        ng /= np.maximum(np.linalg.norm(ng, axis=1, keepdims=True), 1e-300)
+        ns = ng
+        if getattr(scene, "shading_normals", None) is not None:
+            corner = np.take(scene.shading_normals, prim, axis=0).astype(np.float64)
+            ns = np.einsum("nk,nkj->nj", weights, corner)
+            ns /= np.maximum(np.linalg.norm(ns, axis=1, keepdims=True), 1e-300)
+        if directions is None:
+            return {"normal_world": ns, "true_normal_world": ng, "incoming": ns.copy(),
+                    "backfacing": np.zeros(len(prim)), "position_world": position}
+        d = np.asarray(directions, np.float64)
+        back = np.einsum("ij,ij->i", ng, d) > 0
+        sign = np.where(back, -1.0, 1.0)[:, None]
+        return {"normal_world": ns * sign, "true_normal_world": ng * sign, "incoming": -d,
+                "backfacing": back.astype(np.float64), "position_world": position}
 
     def inputs(self, prim, bu, bv) -> HitInputs:
         """The per-hit coordinates ``nodes.evaluate`` reads, at hits (prim, bu, bv)
@@ -320,13 +369,19 @@ class MaterialTextures:
         return np.asarray(nodes.evaluate(material.graph, tuple(material.shading_normal),
                                          inputs, len(prim)), np.float64)
 
-    def closures_at(self, material_id: int, prim, bu, bv, part: str = "all") -> list:
+    def closures_at(self, material_id: int, prim, bu, bv, part: str = "all",
+                    hit_values: dict | None = None) -> list:
         """The material's closures with per-hit parameters at hits (prim, bu, bv); the
         material's graph is evaluated once for all of them (each node once). ``part``:
         "all", or "reflectance" / "emission" for only the node-driven inputs that the seed's
-        (rho_d, rho_s) / M read (``EMISSION_PARAMS``; the others keep their means)."""
+        (rho_d, rho_s) / M read (``EMISSION_PARAMS``; the others keep their means).
+        ``hit_values``: the hits' view (:meth:`view_at`), for materials whose inputs read it
+        (``view_inputs``; without it, the view along the normal)."""
         graph = self.graphs[material_id]
-        evaluator = nodes.Evaluator(graph, self.inputs(prim, bu, bv), len(prim))
+        if hit_values is None and self.view_inputs[material_id]:
+            hit_values = self.view_at(prim, bu, bv)
+        evaluator = nodes.Evaluator(graph, HitInputs(self.corners, prim, bu, bv, hit_values),
+                                    len(prim))
         out = []
         for c in self.scene.materials[material_id].closures:
             wanted = [param for param in c.textures if param != WEIGHT and (
@@ -350,16 +405,17 @@ class MaterialTextures:
         return diffuse, specular, self.exitance(material_id, prim, bu, bv)
 
     def reflectance(self, material_id: int, prim, bu, bv, with_translucent: bool = False,
-                    with_ratios: bool = False):
+                    with_ratios: bool = False, hit_values: dict | None = None):
         """(diffuse, specular) (k, 3) of :meth:`reduction` alone: only the node-driven inputs
         that they read are evaluated (an emission texture is not); ``with_translucent``: also
         the translucent closures' rho_t (``shaders.SeedMaterial.translucent``). Where
         rho_d + rho_s + rho_t exceeds 1 in a channel, all three are scaled down together.
         ``with_ratios``: also (k, C) each closure's weight at the hit over its weight in
         ``mean_closures`` (1 for closures without a node-driven weight; 0 where the mean is
-        0), by which its glossy and glass lobes are scaled per hit."""
+        0), by which its glossy and glass lobes are scaled per hit. ``hit_values``: see
+        :meth:`closures_at`."""
         n = len(prim)
-        closures = self.closures_at(material_id, prim, bu, bv, "reflectance")
+        closures = self.closures_at(material_id, prim, bu, bv, "reflectance", hit_values)
         seed = seed_reduction(closures)
         diffuse, specular, translucent = (np.maximum(np.broadcast_to(x, (n, 3)), 0.0)
                                           for x in (seed.diffuse, seed.specular,
@@ -379,13 +435,13 @@ class MaterialTextures:
             out += (ratios,)
         return out
 
-    def exitance(self, material_id: int, prim, bu, bv):
+    def exitance(self, material_id: int, prim, bu, bv, hit_values: dict | None = None):
         """The exitance (k, 3) of :meth:`reduction` alone (what emitters and photons leaving
         them read): only the emission inputs are evaluated, summed as ``seed_reduction``
         sums them (M = pi x emission x the closure's weight)."""
         n = len(prim)
         out = np.zeros((n, 3))
-        for c in self.closures_at(material_id, prim, bu, bv, "emission"):
+        for c in self.closures_at(material_id, prim, bu, bv, "emission", hit_values):
             key = EMISSION_KEY.get(c.kind)
             if key is not None:
                 out += c.weight * (np.pi * np.asarray(c.params[key], np.float64))

@@ -564,6 +564,7 @@ _NORMAL_KEYS = ("tangent", "normal_matrix")
 _HIT_KEYS = ("normal_world", "true_normal_world", "incoming", "backfacing", "position_world",
              "dPdx", "dPdy")
 _DIFFERENTIAL_KEYS = ("dx", "dy")     # "dx:<key>": the change of <key> across the footprint
+_VIEW_KEYS = _HIT_KEYS[:5]            # what every hit's view gives (no footprint)
 
 
 class _CoordinateRecorder(dict):
@@ -574,8 +575,10 @@ class _CoordinateRecorder(dict):
     def __init__(self, shading_normal: bool = False):
         super().__init__()
         self.asked: set = set()
+        # A closure input may read the hit's view and world-space values too (Fresnel, Layer
+        # Weight, Geometry: ``textures.VIEW_NODES``), which every hit hands over.
         self.keys = _COORDINATE_KEYS + (_NORMAL_KEYS + _HIT_KEYS + _DIFFERENTIAL_KEYS
-                                        if shading_normal else ())
+                                        if shading_normal else _VIEW_KEYS)
 
     def __contains__(self, key) -> bool:
         return isinstance(key, str) and key.split(":", 1)[0] in self.keys
