@@ -127,6 +127,7 @@ def worst_region_error(kind: str, tmp_path, seed: int = 1) -> float:
     return float(np.max(np.abs(a / b - 1.0)))
 
 
+@pytest.mark.parity      # whole renders against Cycles: make test-parity
 @pytest.mark.parametrize("kind", CASES)
 def test_lobes_mixed_by_a_texture_follow_it_per_hit(kind, tmp_path):
     assert worst_region_error(kind, tmp_path) <= BOUND

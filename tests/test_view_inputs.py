@@ -117,6 +117,7 @@ def worst_region_error(kind: str, tmp_path, seed: int = 1) -> float:
     return float(np.max(np.abs(a / b - 1.0)))
 
 
+@pytest.mark.parity      # whole renders against Cycles: make test-parity
 @pytest.mark.parametrize("kind", CASES)
 def test_view_nodes_feed_inputs_per_hit_as_cycles(kind, tmp_path):
     assert worst_region_error(kind, tmp_path) <= BOUND

@@ -152,6 +152,7 @@ def worst_region_error(kind: str, tmp_path, seed: int = 1) -> float:
     return float(np.max(np.abs(a / b - 1.0)))
 
 
+@pytest.mark.parity      # whole renders against Cycles: make test-parity
 @pytest.mark.parametrize("kind", WORLDS)
 def test_world_seen_and_lit_apart_as_cycles(kind, tmp_path):
     assert worst_region_error(kind, tmp_path) <= BOUND
