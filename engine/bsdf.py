@@ -126,8 +126,13 @@ class MaterialTable:
         # (``SurfaceParams.lobe_ratio``), and the closure of each material's specular layer.
         self.lobe_weighted = self.textures.lobe_weighted & self.camera_glossy
         self.has_lobe_weights = bool(self.lobe_weighted.any())
+        # ... and those whose lobes' Roughness is node-driven (``LobeInputs.roughness``).
+        self.lobe_textured = (self.lobe_weighted
+                              | (self.textures.lobe_roughness & self.camera_glossy))
+        self.has_lobe_inputs = bool(self.lobe_textured.any())
         self.closure_count = max([len(m.closures) for m in scene.materials] + [1])
         self.lobe_ratio = np.ones((len(self.diffuse), self.closure_count))
+        self.lobe_roughness = np.full((len(self.diffuse), self.closure_count), np.nan)
         self.layer_closure = np.array([g.layer.closure if g is not None and g.layer is not None
                                        else -1 for g in self.glossy], np.int64)
         # Materials with a glass lobe (light passes through them).
@@ -266,7 +271,7 @@ class MaterialTable:
 # sample or a photon leaving an emitter reads no reflectance, a gather ray meeting an
 # emitter no emission texture).
 REFLECTANCE_SLOTS = ("diffuse", "specular", "diffuse_over_pi", "transport_diffuse",
-                     "transport_specular", "translucent", "lobe_ratio")
+                     "transport_specular", "translucent", "lobe_ratio", "lobe_roughness")
 EMISSION_SLOTS = ("exitance", "emitted_radiance")
 TEXTURED_SLOTS = REFLECTANCE_SLOTS + EMISSION_SLOTS
 
@@ -323,14 +328,17 @@ class SurfaceParams:
         specular = np.take(table.specular, material, axis=0)
         translucent = np.take(table.translucent, material, axis=0)
         ratio = np.ones((len(material), table.closure_count))
+        roughness = np.full((len(material), table.closure_count), np.nan)
         prim, bu, bv = self.hits
         for material_id, at in self._textured_hits(table.textured_reflectance):
-            diffuse[at], specular[at], translucent[at], weights = table.textures.reflectance(
-                material_id, prim[at], bu[at], bv[at], with_translucent=True,
-                with_ratios=True, hit_values=self._view(material_id, at))
+            diffuse[at], specular[at], translucent[at], (weights, rough) = \
+                table.textures.reflectance(material_id, prim[at], bu[at], bv[at],
+                                           with_translucent=True, with_ratios=True,
+                                           hit_values=self._view(material_id, at))
             ratio[at, :weights.shape[1]] = weights
+            roughness[at, :rough.shape[1]] = rough
         cache = self._cache
-        cache["lobe_ratio"] = ratio
+        cache["lobe_ratio"], cache["lobe_roughness"] = ratio, roughness
         cache["diffuse"], cache["specular"] = diffuse, specular
         cache["translucent"] = translucent
         cache["diffuse_over_pi"] = diffuse / np.pi
@@ -371,14 +379,15 @@ class SurfaceParams:
     is_transport_specular = property(lambda self: self._take("is_transport_specular"))
 
     @property
-    def lobe_ratio(self):
-        """(N, C) each closure's node-driven Mix Shader weight at the hit over its mean (what
-        the material's lobes were made with: ``GlossyMaterial.lobe_weights``), or None where
-        no material here has one (the lobes' weights are then exact as they are)."""
-        if self.hits is None or not self.table.has_lobe_weights \
-                or not self.table.lobe_weighted[self.material].any():
+    def lobe_inputs(self) -> "LobeInputs | None":
+        """The lobes' per-hit inputs (``LobeInputs``: node-driven Mix Shader weights and
+        Roughness), or None where no material here has any (the lobes made with the
+        material's means are then exact)."""
+        if self.hits is None or not self.table.has_lobe_inputs \
+                or not self.table.lobe_textured[self.material].any():
             return None
-        return self._take("lobe_ratio")
+        return LobeInputs(self._take("lobe_ratio"), self._take("lobe_roughness"))
+
 
     def replace_diffuse(self, index, diffuse) -> None:
         """Set the diffuse reflectance (k, 3) of the hits ``index`` (and what follows from it:
@@ -407,6 +416,20 @@ class SurfaceParams:
         """The seed's BSDF at these hits; ``transport``: as photons and gather rays see it
         (``MaterialTable.transport_diffuse`` / ``transport_specular``)."""
         return SurfaceBSDF(self, transport)
+
+
+@dataclass
+class LobeInputs:
+    """Per-hit inputs of the hits' lobes, N rows (``LobeInputs[index]`` takes rows):
+    ``ratio`` (N, C) each closure's node-driven Mix Shader weight at the hit over its mean
+    over the surface (what the material's lobes were made with; 1 without one), ``roughness``
+    (N, C) each closure's node-driven Roughness at the hit (NaN: the lobe's own)."""
+
+    ratio: np.ndarray
+    roughness: np.ndarray
+
+    def __getitem__(self, index) -> "LobeInputs":
+        return LobeInputs(self.ratio[index], self.roughness[index])
 
 
 # -- Lobes ----------------------------------------------------------------------------------------
@@ -524,20 +547,34 @@ class GlossyLobe:
     make_fresnel: object
     multiscatter: bool
     depth: int = 0
-    closure: int = -1           # the material's closure it comes from (``lobe_ratio``)
+    closure: int = -1           # the material's closure it comes from (``LobeInputs``)
+    # How its closure's Roughness makes its widths: ("glossy" | "principled", anisotropy)
+    # (``microfacet.alpha_glossy`` / ``alpha_principled``); None: not from a Roughness.
+    roughness_map: tuple | None = None
     transmits = False
 
     @property
     def delta(self) -> bool:
         return self.alpha_x * self.alpha_y < DELTA_ALPHA2
 
-    def at(self, count: int, front=None):
-        """The lobe at ``count`` hits (``front`` is for glass; a reflection ignores it)."""
+    def at(self, count: int, front=None, roughness=None):
+        """The lobe at ``count`` hits (``front`` is for glass; a reflection ignores it);
+        ``roughness`` (count,): its closure's Roughness per hit (NaN: its own widths). A lobe
+        smooth at the mean stays smooth; a rough one keeps alpha^2 above ``DELTA_ALPHA2``."""
         fresnel = self.make_fresnel(count)
         if self.delta:
             return SmoothReflection(fresnel)
-        return MicrofacetReflection(np.full(count, self.alpha_x), np.full(count, self.alpha_y),
-                                    fresnel, multiscatter=self.multiscatter)
+        ax, ay = np.full(count, self.alpha_x), np.full(count, self.alpha_y)
+        if roughness is not None and self.roughness_map is not None:
+            kind, aniso = self.roughness_map
+            given = ~np.isnan(roughness)
+            to_alpha = microfacet.alpha_principled if kind == "principled" \
+                else microfacet.alpha_glossy
+            hx, hy = to_alpha(np.where(given, roughness, 0.0), aniso)
+            floor = np.sqrt(DELTA_ALPHA2) * 1.01
+            ax = np.where(given, np.maximum(hx, floor), ax)
+            ay = np.where(given, np.maximum(hy, floor), ay)
+        return MicrofacetReflection(ax, ay, fresnel, multiscatter=self.multiscatter)
 
 
 @dataclass
@@ -560,18 +597,25 @@ class GlassLobe:
     multiscatter: bool
     depth: int = 0
     closure: int = -1
+    roughness_map: tuple | None = None      # ("glass",): alpha = Roughness^2
     transmits = True
 
     @property
     def delta(self) -> bool:
         return self.alpha * self.alpha < DELTA_ALPHA2
 
-    def at(self, count: int, front=None):
+    def at(self, count: int, front=None, roughness=None):
+        """The lobe at ``count`` hits; ``roughness`` as ``GlossyLobe.at``."""
         eta = np.full(count, float(self.ior)) if front is None else \
             np.where(np.asarray(front, bool), float(self.ior), 1.0 / float(self.ior))
         if self.delta:
             return SmoothGlass(eta, self.reflection_tint, self.transmission_tint, self.f0)
-        return MicrofacetGlass(np.full(count, float(self.alpha)), eta, self.reflection_tint,
+        alpha = np.full(count, float(self.alpha))
+        if roughness is not None and self.roughness_map is not None:
+            given = ~np.isnan(roughness)
+            r = np.clip(np.where(given, roughness, 0.0), 0.0, 1.0)
+            alpha = np.where(given, np.maximum(r * r, np.sqrt(DELTA_ALPHA2) * 1.01), alpha)
+        return MicrofacetGlass(alpha, eta, self.reflection_tint,
                                self.transmission_tint, self.f0, multiscatter=self.multiscatter)
 
 
@@ -589,7 +633,7 @@ class SheenLobe:
     sharp = False
     delta = False
 
-    def at(self, count: int, front=None):
+    def at(self, count: int, front=None, roughness=None):
         return Sheen(np.full(count, self.roughness))
 
 
@@ -648,18 +692,18 @@ class GlossyMaterial:
             out.append(out[-1] * top.cover(wo, n))
         return out
 
-    def lobe_weights(self, wo, n, ratio=None) -> list:
+    def lobe_weights(self, wo, n, per_hit=None) -> list:
         """Each lobe's weight (N, 3) at view directions ``wo``: ``weight`` x the covers above,
-        x ``ratio[:, lobe.closure]`` where given (``SurfaceParams.lobe_ratio`` (N, C): a
-        node-driven Mix Shader Fac's value at each hit over its mean)."""
+        x its closure's ``per_hit.ratio`` where given (``LobeInputs``: a node-driven Mix
+        Shader Fac's value at each hit over its mean)."""
         if not self.tops:
             out = [np.broadcast_to(lobe.weight, (len(wo), 3)) for lobe in self.lobes]
         else:
             covers = self._covers(wo, n)
             out = [lobe.weight[None, :] * covers[lobe.depth] for lobe in self.lobes]
-        if ratio is None:
+        if per_hit is None:
             return out
-        return [w * ratio[:, lobe.closure, None] if lobe.closure >= 0 else w
+        return [w * per_hit.ratio[:, lobe.closure, None] if lobe.closure >= 0 else w
                 for w, lobe in zip(out, self.lobes)]
 
     def diffuse_factor(self, wo, n) -> np.ndarray:
@@ -670,11 +714,16 @@ class GlossyMaterial:
             out = out * np.clip(1.0 - albedo.max(axis=1), 0.0, 1.0)[:, None]
         return out
 
-    def entries(self, count: int, wo, n, front=None, ratio=None) -> list:
-        """[(weight (N, 3), lobe at the hits, delta)] for ``count`` hits (``ratio``: see
-        ``lobe_weights``)."""
-        weights = self.lobe_weights(wo, n, ratio)
-        return [(w, lobe.at(count, front), lobe.delta) for w, lobe in zip(weights, self.lobes)]
+    def entries(self, count: int, wo, n, front=None, per_hit=None) -> list:
+        """[(weight (N, 3), lobe at the hits, delta)] for ``count`` hits; ``per_hit``
+        (``LobeInputs``): weights per hit (``lobe_weights``), and each lobe at its closure's
+        per-hit Roughness where one is node-driven."""
+        weights = self.lobe_weights(wo, n, per_hit)
+        if per_hit is None:
+            return [(w, lobe.at(count, front), lobe.delta)
+                    for w, lobe in zip(weights, self.lobes)]
+        return [(w, lobe.at(count, front, _roughness_of(lobe, per_hit)), lobe.delta)
+                for w, lobe in zip(weights, self.lobes)]
 
 
 def _cosine_views(points: int = 64):
@@ -815,6 +864,11 @@ def glossy_material(closures) -> GlossyMaterial | None:
         multiscatter = c.distribution in ("MULTI_GGX", "")
         if c.kind == "principled":
             found, found_tops = _principled_lobes(c, lobes)
+            own = {id(top.lobe) for top in found_tops}        # coat and sheen: their own
+            for lobe in lobes[first:]:                        # roughness, not Roughness
+                if id(lobe) not in own:
+                    lobe.roughness_map = (("glass",) if isinstance(lobe, GlassLobe) else
+                                          ("principled", p["anisotropic"]))
             if found is not None or found_tops:
                 if layer is not None or tops:
                     return None          # two layered Principled closures: not split yet
@@ -825,7 +879,7 @@ def glossy_material(closures) -> GlossyMaterial | None:
             lobes.append(GlossyLobe(c.weight.copy(), ax, ay,
                                     lambda n, color=color: fresnel_model.ConstantFresnel(
                                         np.broadcast_to(color, (n, 3))),
-                                    multiscatter))
+                                    multiscatter, roughness_map=("glossy", p["anisotropy"])))
         elif c.kind == "metallic":
             ax, ay = (float(v) for v in microfacet.alpha_glossy(p["roughness"], p["anisotropy"]))
             film = max(float(p["thin_film_thickness"]), 1e-5)
@@ -850,7 +904,8 @@ def glossy_material(closures) -> GlossyMaterial | None:
                 make = (lambda n, f0=np.clip(p["base_color"], 0, 1),
                         tint=np.clip(p["edge_tint"], 0, 1):
                         fresnel_model.F82TintFresnel(np.broadcast_to(f0, (n, 3)), tint))
-            lobes.append(GlossyLobe(c.weight.copy(), ax, ay, make, multiscatter))
+            lobes.append(GlossyLobe(c.weight.copy(), ax, ay, make, multiscatter,
+                                    roughness_map=("glossy", p["anisotropy"])))
         elif c.kind == "sheen":
             # The Sheen BSDF node: the microfibre lobe (Cycles' default distribution).
             lobes.append(SheenLobe(c.weight * np.maximum(p["color"], 0),
@@ -862,7 +917,7 @@ def glossy_material(closures) -> GlossyMaterial | None:
             reflection = color if c.kind == "glass" else np.zeros(3)
             lobes.append(GlassLobe(c.weight.copy(), float(p["roughness"]) ** 2,
                                    max(float(p["ior"]), 1e-5), reflection, color.copy(), None,
-                                   multiscatter))
+                                   multiscatter, roughness_map=("glass",)))
         elif c.kind == "transparent":
             # Straight through, tinted by its colour: a smooth interface of index 1 that
             # reflects nothing (Cycles' Transparent BSDF; Principled Alpha < 1 mixes one in).
@@ -940,21 +995,30 @@ def layer_diffuse_factor(table: MaterialTable, material_ids, wo, n) -> np.ndarra
     return out
 
 
-def reflection_albedo(table: MaterialTable, material_ids, wo, n, ratio=None) -> np.ndarray:
+def reflection_albedo(table: MaterialTable, material_ids, wo, n, per_hit=None) -> np.ndarray:
     """(N, 3) the summed directional albedo of each hit's glossy reflection lobes (glass lobes
     left out; sheen and coat with the covers above the lobes below) at view directions
-    ``wo``: 0 where the material has none. ``ratio``: ``SurfaceParams.lobe_ratio`` rows."""
+    ``wo``: 0 where the material has none. ``per_hit``: the hits' ``LobeInputs``."""
     out = np.zeros((len(material_ids), 3))
     for material_id in np.unique(material_ids):
         spec = table.glossy[material_id]
         if spec is None:
             continue
         hits = np.flatnonzero(material_ids == material_id)
-        rows = None if ratio is None else ratio[hits]
-        for w, lobe, _delta in spec.entries(len(hits), wo[hits], n[hits], ratio=rows):
+        rows = None if per_hit is None else per_hit[hits]
+        for w, lobe, _delta in spec.entries(len(hits), wo[hits], n[hits], per_hit=rows):
             if not hasattr(lobe, "albedo_split"):
                 out[hits] += w * lobe.albedo(wo[hits], n[hits])
     return out
+
+
+def _roughness_of(lobe, per_hit: LobeInputs):
+    """(N,) the per-hit Roughness of ``lobe``'s closure (NaN where not node-driven), or None
+    where the lobe does not take one."""
+    if lobe.closure < 0 or getattr(lobe, "roughness_map", None) is None:
+        return None
+    r = per_hit.roughness[:, lobe.closure]
+    return None if np.all(np.isnan(r)) else r
 
 
 def lobe_shares(lobes, wo, n) -> np.ndarray:
@@ -967,7 +1031,7 @@ def lobe_shares(lobes, wo, n) -> np.ndarray:
 
 
 def sample_glossy(table: MaterialTable, material_ids, wo, n, rng, front=None,
-                  with_delta: bool = False, ratio=None):
+                  with_delta: bool = False, per_hit=None):
     """One direction per hit on materials with glossy lobes (``table.glossy``), in the hits'
     order, grouped by material: a lobe picked in proportion to the largest channel of its
     weight x albedo(wo) (the weight with the covers of the layers above it;
@@ -977,8 +1041,8 @@ def sample_glossy(table: MaterialTable, material_ids, wo, n, rng, front=None,
     multiple importance sampling weighs it by. ``wo``, ``n`` (N, 3) float64, ``n`` on wo's
     side; ``front`` (N,) whether each hit is on the front face (glass refracts into the
     object there; None: all are). ``with_delta``: also return delta (N,), whether the picked
-    lobe is a delta (a mirror or smooth glass). ``ratio``: the hits' ``SurfaceParams.
-    lobe_ratio`` (per-hit Mix Shader weights of the lobes; None: their means)."""
+    lobe is a delta (a mirror or smooth glass). ``per_hit``: the hits' ``LobeInputs``
+    (per-hit Mix Shader weights and Roughness of the lobes; None: their means)."""
     count = len(material_ids)
     wi_out = np.zeros((count, 3))
     weight_out = np.zeros((count, 3))
@@ -992,7 +1056,7 @@ def sample_glossy(table: MaterialTable, material_ids, wo, n, rng, front=None,
         side = None if front is None else front[hits]
         wo_h, n_h = wo[hits], n[hits]
         lobes = spec.entries(len(hits), wo_h, n_h, side,
-                             None if ratio is None else ratio[hits])
+                             None if per_hit is None else per_hit[hits])
         shares = lobe_shares([(w, lobe) for w, lobe, _ in lobes], wo_h, n_h)
         total = shares.sum(axis=1)
         cdf = np.cumsum(shares, axis=1)

@@ -313,11 +313,12 @@ def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfa
             # mirrored.
             glossy = np.flatnonzero(surface.camera_glossy[idx])
             if len(glossy):
-                ratio = surface.lobe_ratio
+                per_hit = surface.lobe_inputs
                 g_dirs, g_weight, _pdf = sample_glossy(
                     surfaces.materials, surface.material[idx[glossy]],
                     -incoming[glossy].astype(np.float64), nm[glossy].astype(np.float64), rng,
-                    ~facing[idx[glossy]], ratio=None if ratio is None else ratio[idx[glossy]])
+                    ~facing[idx[glossy]],
+                    per_hit=None if per_hit is None else per_hit[idx[glossy]])
                 dirs = dirs.astype(np.float64)
                 weight = weight.astype(np.float64)
                 dirs[glossy], weight[glossy] = g_dirs, g_weight

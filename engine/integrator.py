@@ -451,9 +451,9 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
                 if materials.has_layer:
                     rho = rho * layer_diffuse_factor(materials, surface.material[met], wo_met,
                                                      n_met)
-                ratio = surface.lobe_ratio
+                per_hit = surface.lobe_inputs
                 rho = rho + reflection_albedo(materials, surface.material[met], wo_met, n_met,
-                                              None if ratio is None else ratio[met]) / np.pi
+                                              None if per_hit is None else per_hit[met]) / np.pi
                 value = photon.surface_irradiance(x[met], ng[met]) * rho * thr[met]
                 if materials.has_translucent:
                     value += (photon.surface_irradiance(x[met], -ng[met]) * thr[met]
@@ -980,8 +980,8 @@ class _GlossyHits:
         self.wo, self.n = wo, n
         self.materials = materials
         self.material_ids = surface.material[self.index]
-        # (N, C) per-hit Mix Shader weights of the lobes over their means, or None
-        self.ratio = surface.lobe_ratio
+        # The lobes' per-hit inputs (``bsdf.LobeInputs``), or None
+        self.per_hit = surface.lobe_inputs
         # (hits (k,) into the vertex, [(weight (k, 3), lobe, delta)], lobe shares (k, J))
         self.groups = []
         self.group_of = np.full(count, -1)
@@ -994,7 +994,7 @@ class _GlossyHits:
             spec = materials.glossy[material_id]
             wo_h, n_h = wo[hits].astype(np.float64), n[hits].astype(np.float64)
             lobes = spec.entries(len(hits), wo_h, n_h, self.front[hits],
-                                 None if self.ratio is None else self.ratio[hits])
+                                 None if self.per_hit is None else self.per_hit[hits])
             if spec.layered:
                 self.diffuse_factor[hits] = spec.diffuse_factor(wo_h, n_h)
             albedo = sum(w * lobe.albedo(wo_h, n_h) for w, lobe, _ in lobes)
@@ -1024,8 +1024,8 @@ class _GlossyHits:
                                         self.wo[self.index].astype(np.float64),
                                         self.n[self.index].astype(np.float64), rng,
                                         self.front[self.index],
-                                        ratio=None if self.ratio is None
-                                        else self.ratio[self.index])
+                                        per_hit=None if self.per_hit is None
+                                        else self.per_hit[self.index])
         return wi, weight, np.any(weight > 0, axis=1) & (pdf > 0), pdf
 
     def radiance(self, target, directions, p_light=None, meets=None):

@@ -796,11 +796,11 @@ def trace_photons(scene: Scene, accel, emitted: EmittedPhotons, rng: np.random.G
                 glossy = spec & params.camera_glossy
                 if glossy.any():
                     g = np.flatnonzero(glossy)
-                    ratio = params.lobe_ratio
+                    per_hit = params.lobe_inputs
                     wi, weight, _pdf = sample_glossy(
                         surfaces.materials, params.material[g], -d[g].astype(np.float64),
                         n[g].astype(np.float64), rng, ~flip_live[g],
-                        ratio=None if ratio is None else ratio[g])
+                        per_hit=None if per_hit is None else per_hit[g])
                     new_dir[g] = wi
                     scale_s[g] = weight / np.where(p_s[g] > 0, p_s[g], 1.0)[:, None]
             power *= np.where(go_diffuse[:, None], scale_d, scale_s)

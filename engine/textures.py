@@ -117,6 +117,9 @@ WEIGHT_EXACT_KINDS = ("diffuse", "emission", "translucent")
 # with the hit's own ray (``MaterialTextures.view_at``).
 VIEW_NODES = ("ShaderNodeFresnel", "ShaderNodeLayerWeight", "ShaderNodeNewGeometry")
 
+# Closure kinds whose lobes take a node-driven Roughness per hit (``bsdf.LobeInputs``).
+LOBE_ROUGHNESS = ("glossy", "metallic", "glass", "refraction", "principled")
+
 # Per-triangle attributes among ``Scene.corner_attributes``: taken, not interpolated.
 PER_TRIANGLE = ("normal_matrix",)
 
@@ -288,6 +291,8 @@ def approximations(closures) -> list[str]:
         for param in c.textures:
             if param == WEIGHT or (c.kind, param) in EXACT_PARAMS:
                 continue
+            if param == "roughness" and c.kind in LOBE_ROUGHNESS:
+                continue                      # per hit (``bsdf.LobeInputs``)
             if c.kind == "principled" and param == "base_color":
                 continue
             out.append(f"{param.replace('_', ' ').title()} of '{c.node}' is driven by nodes; "
@@ -317,6 +322,10 @@ class MaterialTextures:
         self.lobe_weighted = np.array([t and any(WEIGHT in c.textures and c.kind not in
                                                  WEIGHT_EXACT_KINDS for c in m.closures)
                                        for m, t in zip(scene.materials, self.textured)], bool)
+        # Materials whose lobes' Roughness is node-driven (per hit: ``LOBE_ROUGHNESS``).
+        self.lobe_roughness = np.array([t and any("roughness" in c.textures and c.kind in
+                                                  LOBE_ROUGHNESS for c in m.closures)
+                                        for m, t in zip(scene.materials, self.textured)], bool)
         # Materials whose node-driven inputs read the view (``VIEW_NODES``).
         self.view_inputs = np.array([t and _reads_view(m, g) for m, g, t in
                                      zip(scene.materials, self.graphs, self.textured)], bool)
@@ -412,7 +421,8 @@ class MaterialTextures:
         rho_d + rho_s + rho_t exceeds 1 in a channel, all three are scaled down together.
         ``with_ratios``: also (k, C) each closure's weight at the hit over its weight in
         ``mean_closures`` (1 for closures without a node-driven weight; 0 where the mean is
-        0), by which its glossy and glass lobes are scaled per hit. ``hit_values``: see
+        0), by which its glossy and glass lobes are scaled per hit, and (k, C) the
+        Roughness of closures whose lobes take it per hit (NaN elsewhere). ``hit_values``: see
         :meth:`closures_at`."""
         n = len(prim)
         closures = self.closures_at(material_id, prim, bu, bv, "reflectance", hit_values)
@@ -427,12 +437,16 @@ class MaterialTextures:
             out += (translucent * scale,)
         if with_ratios:
             ratios = np.ones((n, len(closures)))
+            roughness = np.full((n, len(closures)), np.nan)
+            originals = self.scene.materials[material_id].closures
             for j, (c, mean) in enumerate(zip(closures, self.mean_closures[material_id])):
-                if WEIGHT in self.scene.materials[material_id].closures[j].textures:
+                if WEIGHT in originals[j].textures:
                     top = float(np.max(mean.weight))
                     hit = np.broadcast_to(c.weight, (n, 3)).max(axis=1)
                     ratios[:, j] = hit / top if top > 0 else 0.0
-            out += (ratios,)
+                if "roughness" in originals[j].textures and c.kind in LOBE_ROUGHNESS:
+                    roughness[:, j] = np.broadcast_to(c.params["roughness"], (n,))
+            out += ((ratios, roughness),)
         return out
 
     def exitance(self, material_id: int, prim, bu, bv, hit_values: dict | None = None):

@@ -95,7 +95,7 @@ def test_glossy_lobe_under_a_driven_mix_is_weighed_per_hit():
     rng = np.random.default_rng(4)
     prim = rng.integers(0, len(exported.triangles), 2000)
     bu, bv = rng.random(2000) * 0.5, rng.random(2000) * 0.5
-    ratio = table.at(np.zeros(2000, np.int64), prim, bu, bv).lobe_ratio
+    ratio = table.at(np.zeros(2000, np.int64), prim, bu, bv).lobe_inputs.ratio
     kinds = [c.kind for c in exported.materials[0].closures]
     glossy_ratio, diffuse_ratio = ratio[:, kinds.index("glossy")], ratio[:, kinds.index("diffuse")]
     on = glossy_ratio > 0
