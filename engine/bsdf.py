@@ -128,11 +128,17 @@ class MaterialTable:
         self.has_lobe_weights = bool(self.lobe_weighted.any())
         # ... and those whose lobes' Roughness is node-driven (``LobeInputs.roughness``).
         self.lobe_textured = (self.lobe_weighted
-                              | (self.textures.lobe_roughness & self.camera_glossy))
+                              | ((self.textures.lobe_roughness | self.textures.lobe_metal)
+                                 & self.camera_glossy))
         self.has_lobe_inputs = bool(self.lobe_textured.any())
         self.closure_count = max([len(m.closures) for m in scene.materials] + [1])
         self.lobe_ratio = np.ones((len(self.diffuse), self.closure_count))
         self.lobe_roughness = np.full((len(self.diffuse), self.closure_count), np.nan)
+        self.lobe_metallic = np.full((len(self.diffuse), self.closure_count), np.nan)
+        self.lobe_base = np.full((len(self.diffuse), self.closure_count, 3), np.nan)
+        # The mean Metallic each material's specular layer was made with (0 without one).
+        self.layer_metallic = np.array([g.layer.metallic_mean if g is not None and
+                                        g.layer is not None else 0.0 for g in self.glossy])
         self.layer_closure = np.array([g.layer.closure if g is not None and g.layer is not None
                                        else -1 for g in self.glossy], np.int64)
         # Materials with a glass lobe (light passes through them).
@@ -271,7 +277,8 @@ class MaterialTable:
 # sample or a photon leaving an emitter reads no reflectance, a gather ray meeting an
 # emitter no emission texture).
 REFLECTANCE_SLOTS = ("diffuse", "specular", "diffuse_over_pi", "transport_diffuse",
-                     "transport_specular", "translucent", "lobe_ratio", "lobe_roughness")
+                     "transport_specular", "translucent", "lobe_ratio", "lobe_roughness",
+                     "lobe_metallic", "lobe_base")
 EMISSION_SLOTS = ("exitance", "emitted_radiance")
 TEXTURED_SLOTS = REFLECTANCE_SLOTS + EMISSION_SLOTS
 
@@ -329,26 +336,34 @@ class SurfaceParams:
         translucent = np.take(table.translucent, material, axis=0)
         ratio = np.ones((len(material), table.closure_count))
         roughness = np.full((len(material), table.closure_count), np.nan)
+        metallic = np.full((len(material), table.closure_count), np.nan)
+        base = np.full((len(material), table.closure_count, 3), np.nan)
         prim, bu, bv = self.hits
         for material_id, at in self._textured_hits(table.textured_reflectance):
-            diffuse[at], specular[at], translucent[at], (weights, rough) = \
+            diffuse[at], specular[at], translucent[at], (weights, rough, metal, colour) = \
                 table.textures.reflectance(material_id, prim[at], bu[at], bv[at],
                                            with_translucent=True, with_ratios=True,
                                            hit_values=self._view(material_id, at))
-            ratio[at, :weights.shape[1]] = weights
-            roughness[at, :rough.shape[1]] = rough
+            c = weights.shape[1]
+            ratio[at, :c], roughness[at, :c] = weights, rough
+            metallic[at, :c], base[at, :c] = metal, colour
         cache = self._cache
         cache["lobe_ratio"], cache["lobe_roughness"] = ratio, roughness
+        cache["lobe_metallic"], cache["lobe_base"] = metallic, base
         cache["diffuse"], cache["specular"] = diffuse, specular
         cache["translucent"] = translucent
         cache["diffuse_over_pi"] = diffuse / np.pi
         cache["transport_diffuse"] = (diffuse * np.take(table.layer_kept, material, axis=0)
                                       + translucent)
         layer = np.take(table.layer_albedo, material, axis=0)
-        if table.has_lobe_weights:       # a specular layer mixed in per hit
+        if table.has_lobe_inputs:        # a specular layer mixed in, or metal, per hit
             closure = np.take(table.layer_closure, material)
             mixed = np.flatnonzero(closure >= 0)
             layer[mixed] *= ratio[mixed, closure[mixed], None]
+            hit_metal = metallic[mixed, closure[mixed]]
+            mean = np.take(table.layer_metallic, material[mixed])
+            layer[mixed] *= np.where(np.isnan(hit_metal), 1.0, (1.0 - np.nan_to_num(hit_metal))
+                                     / np.maximum(1.0 - mean, 1e-12))[:, None]
         cache["transport_specular"] = specular + layer
 
     def _emission_slots(self) -> None:
@@ -386,7 +401,8 @@ class SurfaceParams:
         if self.hits is None or not self.table.has_lobe_inputs \
                 or not self.table.lobe_textured[self.material].any():
             return None
-        return LobeInputs(self._take("lobe_ratio"), self._take("lobe_roughness"))
+        return LobeInputs(self._take("lobe_ratio"), self._take("lobe_roughness"),
+                          self._take("lobe_metallic"), self._take("lobe_base"))
 
 
     def replace_diffuse(self, index, diffuse) -> None:
@@ -423,13 +439,19 @@ class LobeInputs:
     """Per-hit inputs of the hits' lobes, N rows (``LobeInputs[index]`` takes rows):
     ``ratio`` (N, C) each closure's node-driven Mix Shader weight at the hit over its mean
     over the surface (what the material's lobes were made with; 1 without one), ``roughness``
-    (N, C) each closure's node-driven Roughness at the hit (NaN: the lobe's own)."""
+    (N, C) each closure's node-driven Roughness at the hit (NaN: the lobe's own),
+    ``metallic`` (N, C) and ``base`` (N, C, 3) a Principled BSDF's node-driven Metallic and
+    Base Color (NaN: its mean): its metal lobe's weight and colour, its dielectric lobes'
+    weight (``GlossyLobe.metal_part``)."""
 
     ratio: np.ndarray
     roughness: np.ndarray
+    metallic: np.ndarray
+    base: np.ndarray
 
     def __getitem__(self, index) -> "LobeInputs":
-        return LobeInputs(self.ratio[index], self.roughness[index])
+        return LobeInputs(self.ratio[index], self.roughness[index], self.metallic[index],
+                          self.base[index])
 
 
 # -- Lobes ----------------------------------------------------------------------------------------
@@ -551,17 +573,27 @@ class GlossyLobe:
     # How its closure's Roughness makes its widths: ("glossy" | "principled", anisotropy)
     # (``microfacet.alpha_glossy`` / ``alpha_principled``); None: not from a Roughness.
     roughness_map: tuple | None = None
+    # In a Principled BSDF: "metal" (weight x Metallic, Fresnel from Base Color ``base_mean``)
+    # or "dielectric" (weight x (1 - Metallic)), made at ``metallic_mean``; None elsewhere.
+    metal_part: str | None = None
+    metallic_mean: float = 0.0
+    base_mean: np.ndarray | None = None
     transmits = False
 
     @property
     def delta(self) -> bool:
         return self.alpha_x * self.alpha_y < DELTA_ALPHA2
 
-    def at(self, count: int, front=None, roughness=None):
+    def at(self, count: int, front=None, roughness=None, base=None):
         """The lobe at ``count`` hits (``front`` is for glass; a reflection ignores it);
         ``roughness`` (count,): its closure's Roughness per hit (NaN: its own widths). A lobe
-        smooth at the mean stays smooth; a rough one keeps alpha^2 above ``DELTA_ALPHA2``."""
-        fresnel = self.make_fresnel(count)
+        smooth at the mean stays smooth; a rough one keeps alpha^2 above ``DELTA_ALPHA2``.
+        ``base`` (count, 3): a metal part's Base Color per hit (NaN: ``base_mean``)."""
+        if base is not None and self.metal_part == "metal" and self.base_mean is not None:
+            f0 = np.where(np.isnan(base), self.base_mean, np.clip(np.nan_to_num(base), 0, 1))
+            fresnel = self.make_fresnel(count, f0=f0)
+        else:
+            fresnel = self.make_fresnel(count)
         if self.delta:
             return SmoothReflection(fresnel)
         ax, ay = np.full(count, self.alpha_x), np.full(count, self.alpha_y)
@@ -598,14 +630,17 @@ class GlassLobe:
     depth: int = 0
     closure: int = -1
     roughness_map: tuple | None = None      # ("glass",): alpha = Roughness^2
+    metal_part: str | None = None           # "dielectric" in a Principled BSDF
+    metallic_mean: float = 0.0
     transmits = True
 
     @property
     def delta(self) -> bool:
         return self.alpha * self.alpha < DELTA_ALPHA2
 
-    def at(self, count: int, front=None, roughness=None):
-        """The lobe at ``count`` hits; ``roughness`` as ``GlossyLobe.at``."""
+    def at(self, count: int, front=None, roughness=None, base=None):
+        """The lobe at ``count`` hits; ``roughness`` as ``GlossyLobe.at`` (``base``, the
+        Base Color per hit, is not read: the transmission tint keeps its mean)."""
         eta = np.full(count, float(self.ior)) if front is None else \
             np.where(np.asarray(front, bool), float(self.ior), 1.0 / float(self.ior))
         if self.delta:
@@ -633,7 +668,7 @@ class SheenLobe:
     sharp = False
     delta = False
 
-    def at(self, count: int, front=None, roughness=None):
+    def at(self, count: int, front=None, roughness=None, base=None):
         return Sheen(np.full(count, self.roughness))
 
 
@@ -703,8 +738,22 @@ class GlossyMaterial:
             out = [lobe.weight[None, :] * covers[lobe.depth] for lobe in self.lobes]
         if per_hit is None:
             return out
-        return [w * per_hit.ratio[:, lobe.closure, None] if lobe.closure >= 0 else w
-                for w, lobe in zip(out, self.lobes)]
+        out = [w * per_hit.ratio[:, lobe.closure, None] if lobe.closure >= 0 else w
+               for w, lobe in zip(out, self.lobes)]
+        for j, lobe in enumerate(self.lobes):
+            part = getattr(lobe, "metal_part", None)
+            if part is None or lobe.closure < 0:
+                continue
+            m = per_hit.metallic[:, lobe.closure]
+            if np.all(np.isnan(m)):
+                continue
+            m = np.where(np.isnan(m), lobe.metallic_mean, m)
+            if part == "metal":
+                scale = m / max(lobe.metallic_mean, 1e-12)
+            else:
+                scale = (1.0 - m) / max(1.0 - lobe.metallic_mean, 1e-12)
+            out[j] = out[j] * scale[:, None]
+        return out
 
     def diffuse_factor(self, wo, n) -> np.ndarray:
         """(N, 3) the share of the diffuse below the layers at view directions ``wo``."""
@@ -722,8 +771,9 @@ class GlossyMaterial:
         if per_hit is None:
             return [(w, lobe.at(count, front), lobe.delta)
                     for w, lobe in zip(weights, self.lobes)]
-        return [(w, lobe.at(count, front, _roughness_of(lobe, per_hit)), lobe.delta)
-                for w, lobe in zip(weights, self.lobes)]
+        return [(w, lobe.at(count, front, _roughness_of(lobe, per_hit),
+                            None if lobe.closure < 0 else per_hit.base[:, lobe.closure]),
+                 lobe.delta) for w, lobe in zip(weights, self.lobes)]
 
 
 def _cosine_views(points: int = 64):
@@ -811,7 +861,8 @@ def _principled_lobes(c, lobes):
         else:
             make = (lambda n, f0=f0, tint=tint: fresnel_model.F82TintFresnel(
                 np.broadcast_to(f0, (n, 3)), tint))
-        lobes.append(GlossyLobe(weight * metallic, ax, ay, make, multiscatter, depth=depth))
+        lobes.append(GlossyLobe(weight * metallic, ax, ay, make, multiscatter, depth=depth,
+                                metal_part="metal", metallic_mean=metallic, base_mean=f0))
         weight = weight * (1 - metallic)
     ior = max(float(p["ior"]), 1e-5)
     f0 = float(fresnel_model.f0_from_ior(ior))
@@ -832,7 +883,8 @@ def _principled_lobes(c, lobes):
         lobes.append(GlassLobe(weight * transmission, float(p["roughness"]) ** 2, max(eta, 1e-5),
                                np.ones(3), np.sqrt(np.clip(p["base_color"], 0, None)),
                                None if plain else np.broadcast_to(tinted, (3,)).copy(),
-                               multiscatter, depth=depth))
+                               multiscatter, depth=depth, metal_part="dielectric",
+                               metallic_mean=metallic))
     weight = weight * (1 - transmission)
     if (eta == 1.0 and not film) or not np.any(weight > 0):
         return None, tops
@@ -844,7 +896,8 @@ def _principled_lobes(c, lobes):
     else:
         make = (lambda n, eta=eta, tinted=tinted: fresnel_model.TintedDielectricFresnel(
             np.full(n, eta), np.broadcast_to(tinted, (n, 3))))
-    layer = GlossyLobe(weight, ax, ay, make, multiscatter, depth=depth)
+    layer = GlossyLobe(weight, ax, ay, make, multiscatter, depth=depth,
+                       metal_part="dielectric", metallic_mean=metallic)
     lobes.append(layer)
     return layer, tops
 

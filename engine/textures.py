@@ -299,12 +299,15 @@ def approximations(closures) -> list[str]:
                        "its glossy and glass lobes use its mean over the surface (per-hit "
                        "values reach the diffuse, the emission and the roulette only)")
         if c.kind == "principled" and "base_color" in c.textures and (
-                np.any(np.asarray(c.params["metallic"]) > 0)
-                or np.any(np.asarray(c.params["transmission"]) > 0) or "metallic" in c.textures
+                np.any(np.asarray(c.params["transmission"]) > 0)
                 or "transmission" in c.textures):
-            out.append(f"Base Color of '{c.node}' is driven by nodes; its metal and "
-                       "transmission lobes use its mean over the surface (the diffuse follows "
-                       "the texture per hit)")
+            out.append(f"Base Color of '{c.node}' is driven by nodes; its transmission lobe "
+                       "uses its mean over the surface (the diffuse and the metal follow the "
+                       "texture per hit)")
+        if c.kind == "principled" and "transmission" in c.textures:
+            out.append(f"Transmission Weight of '{c.node}' is driven by nodes; its glass and "
+                       "specular lobes use its mean over the surface (the diffuse follows it "
+                       "per hit)")
     return out
 
 
@@ -326,6 +329,11 @@ class MaterialTextures:
         self.lobe_roughness = np.array([t and any("roughness" in c.textures and c.kind in
                                                   LOBE_ROUGHNESS for c in m.closures)
                                         for m, t in zip(scene.materials, self.textured)], bool)
+        # Materials with a Principled BSDF whose Metallic or Base Color is node-driven: its
+        # metal lobe's weight and colour, and its dielectric lobes' weight, per hit.
+        self.lobe_metal = np.array([t and any(c.kind == "principled" and (
+            "metallic" in c.textures or "base_color" in c.textures) for c in m.closures)
+            for m, t in zip(scene.materials, self.textured)], bool)
         # Materials whose node-driven inputs read the view (``VIEW_NODES``).
         self.view_inputs = np.array([t and _reads_view(m, g) for m, g, t in
                                      zip(scene.materials, self.graphs, self.textured)], bool)
@@ -421,8 +429,9 @@ class MaterialTextures:
         rho_d + rho_s + rho_t exceeds 1 in a channel, all three are scaled down together.
         ``with_ratios``: also (k, C) each closure's weight at the hit over its weight in
         ``mean_closures`` (1 for closures without a node-driven weight; 0 where the mean is
-        0), by which its glossy and glass lobes are scaled per hit, and (k, C) the
-        Roughness of closures whose lobes take it per hit (NaN elsewhere). ``hit_values``: see
+        0), by which its glossy and glass lobes are scaled per hit, (k, C) the Roughness of
+        closures whose lobes take it per hit, (k, C) a Principled BSDF's Metallic and (k, C,
+        3) its Base Color where nodes drive them (NaN elsewhere). ``hit_values``: see
         :meth:`closures_at`."""
         n = len(prim)
         closures = self.closures_at(material_id, prim, bu, bv, "reflectance", hit_values)
@@ -438,6 +447,8 @@ class MaterialTextures:
         if with_ratios:
             ratios = np.ones((n, len(closures)))
             roughness = np.full((n, len(closures)), np.nan)
+            metallic = np.full((n, len(closures)), np.nan)
+            base = np.full((n, len(closures), 3), np.nan)
             originals = self.scene.materials[material_id].closures
             for j, (c, mean) in enumerate(zip(closures, self.mean_closures[material_id])):
                 if WEIGHT in originals[j].textures:
@@ -446,7 +457,11 @@ class MaterialTextures:
                     ratios[:, j] = hit / top if top > 0 else 0.0
                 if "roughness" in originals[j].textures and c.kind in LOBE_ROUGHNESS:
                     roughness[:, j] = np.broadcast_to(c.params["roughness"], (n,))
-            out += ((ratios, roughness),)
+                if c.kind == "principled" and "metallic" in originals[j].textures:
+                    metallic[:, j] = np.broadcast_to(c.params["metallic"], (n,))
+                if c.kind == "principled" and "base_color" in originals[j].textures:
+                    base[:, j] = np.broadcast_to(c.params["base_color"], (n, 3))
+            out += ((ratios, roughness, metallic, base),)
         return out
 
     def exitance(self, material_id: int, prim, bu, bv, hit_values: dict | None = None):

@@ -20,17 +20,21 @@ squares; the world is dim grey. Two materials:
   Transparent BSDF in by 1 - Alpha per hit. Before, a node-driven Alpha was ignored
   (rendered opaque, with a warning);
 * ``roughness``: a Principled copper metal whose Roughness is the Checker's Color (0.15 and
-  0.6 squares). Before, the lobes took the mean Roughness 0.375 everywhere.
+  0.6 squares). Before, the lobes took the mean Roughness 0.375 everywhere;
+* ``metallic``: one Principled BSDF (Roughness 0.3) whose Metallic is the Checker's Fac and
+  Base Color the Checker's Color (copper metal squares, red dielectric ones), a PBR
+  metal/roughness texture set. Before, its metal lobe took the mean Metallic and colour on
+  every square (silently).
 
 Each renders at ``final``'s settings but 64 samples a pixel (at 16 the highlight regions'
 noise is 1.3 %: their worst was 2.5 % at seeds 1-3, the sign changing with the seed),
 against inline Cycles (2048 spp), compared per 4 x 4 region (luminance): the worst region
 0.50 / 1.04 / 0.79 % (glossy), 0.64 / 0.40 / 0.71 % (metal), 0.30 / 0.37 / 0.19 % (alpha)
-and 1.31 / 1.59 / 2.69 % (roughness) at seeds 1-3. The roughness case's worst region (the
+1.31 / 1.59 / 2.69 % (roughness) and 0.53 / 0.64 / 0.71 % (metallic) at seeds 1-3. The roughness case's worst region (the
 near floor's sharp squares) reads -0.7 / -1.6 / -2.7 % against Cycles at 8192 spp: noise of
 about 1 % around perhaps a small bias of the sharp lobe's highlight, hence its wider bound.
 With the lobes at their mean weight it is 129 % (glossy) and 190 % (metal) off; with the
-Alpha ignored, 96 %; at the mean Roughness, 299 %.
+Alpha ignored, 96 %; at the mean Roughness, 299 %; at the mean Metallic and colour, 99 %.
 """
 import numpy as np
 import pytest
@@ -39,10 +43,10 @@ bpy = pytest.importorskip("bpy")
 
 from inline_cycles import cycles_image, node_material  # noqa: E402
 
-CASES = ("glossy", "metal", "alpha", "roughness")
+CASES = ("glossy", "metal", "alpha", "roughness", "metallic")
 CYCLES_SAMPLES = 2048
 SAMPLES = 64
-BOUND = {"glossy": 0.025, "metal": 0.025, "alpha": 0.025, "roughness": 0.04}
+BOUND = {"glossy": 0.025, "metal": 0.025, "alpha": 0.025, "roughness": 0.04, "metallic": 0.025}
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 
@@ -54,6 +58,15 @@ def _material(kind: str):
     checker.inputs["Color2"].default_value = (0.0, 0.0, 0.0, 1.0)
     mix = tree.nodes.new("ShaderNodeMixShader")
     tree.links.new(checker.outputs["Fac"], mix.inputs[0])
+    if kind == "metallic":
+        checker.inputs["Color1"].default_value = (0.955, 0.638, 0.538, 1.0)
+        checker.inputs["Color2"].default_value = (0.6, 0.05, 0.03, 1.0)
+        pbr = tree.nodes.new("ShaderNodeBsdfPrincipled")
+        pbr.inputs["Roughness"].default_value = 0.3
+        tree.links.new(checker.outputs["Color"], pbr.inputs["Base Color"])
+        tree.links.new(checker.outputs["Fac"], pbr.inputs["Metallic"])
+        tree.links.new(pbr.outputs[0], out.inputs["Surface"])
+        return mat
     if kind == "roughness":
         checker.inputs["Color1"].default_value = (0.6, 0.6, 0.6, 1.0)
         checker.inputs["Color2"].default_value = (0.15, 0.15, 0.15, 1.0)
