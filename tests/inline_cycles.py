@@ -1,9 +1,12 @@
-"""Helpers for tests that render a small bpy scene with Cycles inline and compare: a black
-world, and Cycles' image of the scene as an (H, W, 3) float64 array (row 0 at the top, as
-Lanterna's images), read back from an EXR written under ``tmp_path``."""
+"""Helpers for tests that render a small bpy scene with Cycles inline and compare: a black or
+grey world, a camera and an area light, Cycles' image of the scene as an (H, W, 3) float64
+array (row 0 at the top, as Lanterna's images), read back from an EXR written under
+``tmp_path``, Lanterna's image at ``final``'s settings, and 4 x 4 region means."""
 import pathlib
 
 import numpy as np
+
+LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 
 def black_world(bpy, scene) -> None:
@@ -13,6 +16,57 @@ def black_world(bpy, scene) -> None:
         world.use_nodes = True
     world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
     scene.world = world
+
+
+def grey_world(bpy, scene, value: float) -> None:
+    """A World whose Background is grey ``value`` at strength 1."""
+    world = bpy.data.worlds.new("Grey")
+    if world.node_tree is None:
+        world.use_nodes = True
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (value, value, value, 1)
+    scene.world = world
+
+
+def add_camera(bpy, scene, location, rotation) -> None:
+    """A perspective camera at ``location`` with Euler ``rotation`` [rad], made active."""
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    cam.location = location
+    cam.rotation_euler = rotation
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+
+
+def add_area_light(bpy, scene, energy: float, size: float, location, rotation) -> None:
+    """A square area light of ``energy`` [W] and ``size`` [m]."""
+    light = bpy.data.objects.new("Light", bpy.data.lights.new("Light", "AREA"))
+    light.data.energy = energy
+    light.data.size = size
+    light.location = location
+    light.rotation_euler = rotation
+    scene.collection.objects.link(light)
+
+
+def regions(image, luminance: bool = False) -> np.ndarray:
+    """Means of a 4 x 4 grid of regions: (4, 4, 3), or (4, 4) of luminance."""
+    h, w = image.shape[:2]
+    means = image.reshape(4, h // 4, 4, w // 4, 3).mean(axis=(1, 3))
+    return means @ LUMA if luminance else means
+
+
+def lanterna_image(bpy, seed: int, samples: int | None = None):
+    """(exported scene, image (H, W, 3)) of the current scene by Lanterna at ``final``'s
+    settings (``samples`` a pixel where given), checked finite."""
+    from lanterna.engine.blender.export import export_scene
+    from lanterna.engine.pipeline import RenderSettings, render
+    from lanterna.engine.settings import PRESETS
+
+    exported = export_scene(bpy.context.evaluated_depsgraph_get())
+    # (``RenderSettings(preset="final", samples=...)`` would keep the preset's 16 samples.)
+    settings = RenderSettings(seed=seed, preset="final") if samples is None else \
+        RenderSettings(**{**PRESETS["final"], "samples": samples, "seed": seed})
+    image = np.asarray(render(exported, settings).image)
+    assert np.all(np.isfinite(image))
+    return exported, image
 
 
 def cycles_image(bpy, scene, tmp_path, samples: int, adaptive: bool = True) -> np.ndarray:

@@ -41,13 +41,13 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from inline_cycles import cycles_image, node_material  # noqa: E402
+from inline_cycles import (add_area_light, add_camera, cycles_image, grey_world,  # noqa: E402
+                           lanterna_image, node_material, regions)
 
 CASES = ("glossy", "metal", "alpha", "roughness", "metallic")
 CYCLES_SAMPLES = 2048
 SAMPLES = 64
 BOUND = {"glossy": 0.025, "metal": 0.025, "alpha": 0.025, "roughness": 0.04, "metallic": 0.025}
-LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 
 def _material(kind: str):
@@ -115,45 +115,21 @@ def _scene(kind: str):
         emission.inputs["Color"].default_value = (0.2, 0.4, 1.0, 1.0)
         tree.links.new(emission.outputs[0], out.inputs["Surface"])
         bpy.context.object.data.materials.append(glow)
-    light = bpy.data.objects.new("Light", bpy.data.lights.new("Light", "AREA"))
-    light.data.energy = 150.0
-    light.data.size = 1.0
-    light.location = (0.0, 1.6, 1.6)
-    light.rotation_euler = (-np.pi / 4, 0.0, 0.0)
-    scene.collection.objects.link(light)
-    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    cam.location = (0.0, -3.2, 2.6)
-    cam.rotation_euler = (np.radians(52.0), 0.0, 0.0)
-    scene.collection.objects.link(cam)
-    scene.camera = cam
-    world = bpy.data.worlds.new("Dim")
-    if world.node_tree is None:
-        world.use_nodes = True
-    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.05, 0.05, 0.05, 1)
-    scene.world = world
+    add_area_light(bpy, scene, 150.0, 1.0, (0.0, 1.6, 1.6), (-np.pi / 4, 0.0, 0.0))
+    add_camera(bpy, scene, (0.0, -3.2, 2.6), (np.radians(52.0), 0.0, 0.0))
+    grey_world(bpy, scene, 0.05)
     return scene
 
 
-def _regions(image):
-    h, w = image.shape[:2]
-    return (image @ LUMA).reshape(4, h // 4, 4, w // 4).mean(axis=(1, 3))
-
-
 def worst_region_error(kind: str, tmp_path, seed: int = 1) -> float:
-    from lanterna.engine.blender.export import export_scene
-    from lanterna.engine.pipeline import RenderSettings, render
-    from lanterna.engine.settings import PRESETS
-
+    """Worst relative difference of a region's mean luminance."""
     scene = _scene(kind)
-    exported = export_scene(bpy.context.evaluated_depsgraph_get())
+    exported, ours = lanterna_image(bpy, seed, SAMPLES)
     assert not any("mean" in w or "Alpha" in w or "Roughness" in w
                    for w in exported.warnings), exported.warnings
-    settings = RenderSettings(**{**PRESETS["final"], "samples": SAMPLES, "seed": seed})
-    ours = np.asarray(render(exported, settings).image)
-    assert np.all(np.isfinite(ours))
     cycles = cycles_image(bpy, scene, tmp_path, CYCLES_SAMPLES)
-    a, b = _regions(ours), _regions(cycles)
-    return float(np.max(np.abs(a / b - 1.0)))
+    return float(np.max(np.abs(regions(ours, luminance=True)
+                               / regions(cycles, luminance=True) - 1.0)))
 
 
 @pytest.mark.parity      # whole renders against Cycles: make test-parity

@@ -25,7 +25,8 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from inline_cycles import cycles_image, node_material  # noqa: E402
+from inline_cycles import (add_area_light, add_camera, cycles_image, grey_world,  # noqa: E402
+                           lanterna_image, node_material, regions)
 
 CASES = ("fresnel", "facing")
 CYCLES_SAMPLES = 2048
@@ -76,45 +77,20 @@ def _scene(kind: str):
                                          ring_count=32)
     bpy.ops.object.shade_smooth()
     bpy.context.object.data.materials.append(_sphere_material(kind))
-    light = bpy.data.objects.new("Light", bpy.data.lights.new("Light", "AREA"))
-    light.data.energy = 300.0
-    light.data.size = 1.0
-    light.location = (1.5, -1.5, 3.5)
-    light.rotation_euler = (np.radians(25.0), np.radians(20.0), 0.0)
-    scene.collection.objects.link(light)
-    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    cam.location = (0.0, -5.5, 1.8)
-    cam.rotation_euler = (np.radians(82.0), 0.0, 0.0)
-    scene.collection.objects.link(cam)
-    scene.camera = cam
-    world = bpy.data.worlds.new("Dim")
-    if world.node_tree is None:
-        world.use_nodes = True
-    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.1, 0.1, 0.1, 1)
-    scene.world = world
+    add_area_light(bpy, scene, 300.0, 1.0, (1.5, -1.5, 3.5),
+                   (np.radians(25.0), np.radians(20.0), 0.0))
+    add_camera(bpy, scene, (0.0, -5.5, 1.8), (np.radians(82.0), 0.0, 0.0))
+    grey_world(bpy, scene, 0.1)
     return scene
-
-
-def _regions(image):
-    h, w = image.shape[:2]
-    return image.reshape(4, h // 4, 4, w // 4, 3).mean(axis=(1, 3))
 
 
 def worst_region_error(kind: str, tmp_path, seed: int = 1) -> float:
     """Worst relative difference of a region's mean, per channel."""
-    from lanterna.engine.blender.export import export_scene
-    from lanterna.engine.pipeline import RenderSettings, render
-    from lanterna.engine.settings import PRESETS
-
     scene = _scene(kind)
-    exported = export_scene(bpy.context.evaluated_depsgraph_get())
+    exported, ours = lanterna_image(bpy, seed, SAMPLES)
     assert not any("View" in w for w in exported.warnings), exported.warnings
-    settings = RenderSettings(**{**PRESETS["final"], "samples": SAMPLES, "seed": seed})
-    ours = np.asarray(render(exported, settings).image)
-    assert np.all(np.isfinite(ours))
     cycles = cycles_image(bpy, scene, tmp_path, CYCLES_SAMPLES)
-    a, b = _regions(ours), _regions(cycles)
-    return float(np.max(np.abs(a / b - 1.0)))
+    return float(np.max(np.abs(regions(ours) / regions(cycles) - 1.0)))
 
 
 @pytest.mark.parity      # whole renders against Cycles: make test-parity

@@ -26,7 +26,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from inline_cycles import cycles_image, node_material  # noqa: E402
+from inline_cycles import add_camera, cycles_image, lanterna_image, node_material, regions  # noqa: E402,E501
 
 WORLDS = ("flat", "image lights", "image seen")
 LIT = (1.0, 0.5, 0.2)         # the lighting Background's colour where it is flat
@@ -117,39 +117,19 @@ def _scene(kind: str):
     bpy.ops.mesh.primitive_plane_add(size=1.0, location=(1.0, 0.0, 1.6),
                                      rotation=(np.pi / 2, 0.0, 0.0))
     _surface("Card", "ShaderNodeBsdfTransparent", (CARD,) * 3)
-    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    cam.location = (0.0, -6.0, 1.4)
-    cam.rotation_euler = (np.pi / 2, 0.0, 0.0)
-    scene.collection.objects.link(cam)
-    scene.camera = cam
+    add_camera(bpy, scene, (0.0, -6.0, 1.4), (np.pi / 2, 0.0, 0.0))
     scene.world = _world(kind)
     return scene
-
-
-def _regions(image):
-    h, w = image.shape[:2]
-    return image.reshape(4, h // 4, 4, w // 4, 3).mean(axis=(1, 3))
-
-
-def _ours(seed: int):
-    from lanterna.engine.blender.export import export_scene
-    from lanterna.engine.pipeline import RenderSettings, render
-
-    exported = export_scene(bpy.context.evaluated_depsgraph_get())
-    assert not any("World" in w for w in exported.warnings), exported.warnings
-    image = np.asarray(render(exported, RenderSettings(seed=seed, preset="final")).image)
-    assert np.all(np.isfinite(image))
-    return exported, image
 
 
 def worst_region_error(kind: str, tmp_path, seed: int = 1) -> float:
     """Worst relative difference of a 4 x 4 region's channel mean, ours against Cycles."""
     scene = _scene(kind)
-    exported, ours = _ours(seed)
+    exported, ours = lanterna_image(bpy, seed)
+    assert not any("World" in w for w in exported.warnings), exported.warnings
     assert exported.world.camera is not None
     cycles = cycles_image(bpy, scene, tmp_path, CYCLES_SAMPLES)
-    a, b = _regions(ours), _regions(cycles)
-    return float(np.max(np.abs(a / b - 1.0)))
+    return float(np.max(np.abs(regions(ours) / regions(cycles) - 1.0)))
 
 
 @pytest.mark.parity      # whole renders against Cycles: make test-parity
