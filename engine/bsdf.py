@@ -74,6 +74,8 @@ __all__ = ["MaterialTable", "SurfaceParams", "Lambertian", "PerfectMirror", "Sur
 
 # Below this alpha_x alpha_y a microfacet lobe is a mirror (Cycles' delta threshold).
 DELTA_ALPHA2 = 2e-10
+# The narrowest width a per-hit Roughness gives a lobe that is rough at its mean.
+MIN_TEXTURED_ALPHA = np.sqrt(DELTA_ALPHA2) * 1.01
 # Cycles skips Principled components of weight at or below this (``CLOSURE_WEIGHT_CUTOFF``).
 CLOSURE_WEIGHT_CUTOFF = 1e-5
 
@@ -360,10 +362,9 @@ class SurfaceParams:
             closure = np.take(table.layer_closure, material)
             mixed = np.flatnonzero(closure >= 0)
             layer[mixed] *= ratio[mixed, closure[mixed], None]
-            hit_metal = metallic[mixed, closure[mixed]]
-            mean = np.take(table.layer_metallic, material[mixed])
-            layer[mixed] *= np.where(np.isnan(hit_metal), 1.0, (1.0 - np.nan_to_num(hit_metal))
-                                     / np.maximum(1.0 - mean, 1e-12))[:, None]
+            layer[mixed] *= metal_factor("dielectric", metallic[mixed, closure[mixed]],
+                                         np.take(table.layer_metallic,
+                                                 material[mixed]))[:, None]
         cache["transport_specular"] = specular + layer
 
     def _emission_slots(self) -> None:
@@ -603,9 +604,8 @@ class GlossyLobe:
             to_alpha = microfacet.alpha_principled if kind == "principled" \
                 else microfacet.alpha_glossy
             hx, hy = to_alpha(np.where(given, roughness, 0.0), aniso)
-            floor = np.sqrt(DELTA_ALPHA2) * 1.01
-            ax = np.where(given, np.maximum(hx, floor), ax)
-            ay = np.where(given, np.maximum(hy, floor), ay)
+            ax = np.where(given, np.maximum(hx, MIN_TEXTURED_ALPHA), ax)
+            ay = np.where(given, np.maximum(hy, MIN_TEXTURED_ALPHA), ay)
         return MicrofacetReflection(ax, ay, fresnel, multiscatter=self.multiscatter)
 
 
@@ -649,7 +649,7 @@ class GlassLobe:
         if roughness is not None and self.roughness_map is not None:
             given = ~np.isnan(roughness)
             r = np.clip(np.where(given, roughness, 0.0), 0.0, 1.0)
-            alpha = np.where(given, np.maximum(r * r, np.sqrt(DELTA_ALPHA2) * 1.01), alpha)
+            alpha = np.where(given, np.maximum(r * r, MIN_TEXTURED_ALPHA), alpha)
         return MicrofacetGlass(alpha, eta, self.reflection_tint,
                                self.transmission_tint, self.f0, multiscatter=self.multiscatter)
 
@@ -664,6 +664,8 @@ class SheenLobe:
     roughness: float
     depth: int = 0
     closure: int = -1
+    roughness_map = None              # its own Roughness, not per hit
+    metal_part = None
     transmits = False
     sharp = False
     delta = False
@@ -741,18 +743,10 @@ class GlossyMaterial:
         out = [w * per_hit.ratio[:, lobe.closure, None] if lobe.closure >= 0 else w
                for w, lobe in zip(out, self.lobes)]
         for j, lobe in enumerate(self.lobes):
-            part = getattr(lobe, "metal_part", None)
-            if part is None or lobe.closure < 0:
-                continue
-            m = per_hit.metallic[:, lobe.closure]
-            if np.all(np.isnan(m)):
-                continue
-            m = np.where(np.isnan(m), lobe.metallic_mean, m)
-            if part == "metal":
-                scale = m / max(lobe.metallic_mean, 1e-12)
-            else:
-                scale = (1.0 - m) / max(1.0 - lobe.metallic_mean, 1e-12)
-            out[j] = out[j] * scale[:, None]
+            if lobe.metal_part is not None and lobe.closure >= 0:
+                out[j] = out[j] * metal_factor(lobe.metal_part,
+                                               per_hit.metallic[:, lobe.closure],
+                                               lobe.metallic_mean)[:, None]
         return out
 
     def diffuse_factor(self, wo, n) -> np.ndarray:
@@ -1065,10 +1059,20 @@ def reflection_albedo(table: MaterialTable, material_ids, wo, n, per_hit=None) -
     return out
 
 
+def metal_factor(part: str, metallic, mean) -> np.ndarray:
+    """(N,) what a Principled lobe made at Metallic ``mean`` is scaled by at hits of Metallic
+    ``metallic`` (N,) (NaN: the mean): Metallic / mean for the "metal" part, (1 - Metallic) /
+    (1 - mean) for a "dielectric" one (``GlossyLobe.metal_part``)."""
+    m = np.where(np.isnan(metallic), mean, metallic)
+    if part == "metal":
+        return m / np.maximum(mean, 1e-12)
+    return (1.0 - m) / np.maximum(1.0 - mean, 1e-12)
+
+
 def _roughness_of(lobe, per_hit: LobeInputs):
     """(N,) the per-hit Roughness of ``lobe``'s closure (NaN where not node-driven), or None
     where the lobe does not take one."""
-    if lobe.closure < 0 or getattr(lobe, "roughness_map", None) is None:
+    if lobe.closure < 0 or lobe.roughness_map is None:
         return None
     r = per_hit.roughness[:, lobe.closure]
     return None if np.all(np.isnan(r)) else r

@@ -197,6 +197,12 @@ def _light_fluxes(scene: Scene, target=None):
     return out
 
 
+def _photon_lights(scene: Scene, target=None) -> list:
+    """``_light_fluxes`` of the lights that send photons: some flux, a photon share above 0."""
+    return [entry for entry in _light_fluxes(scene, target) if np.any(entry[1] > 0)
+            and getattr(entry[2][1], "photon_share", 1.0) > 0]
+
+
 def _cosine_weighted_radiance(world, portals) -> np.ndarray:
     """(P, 3): for each portal, the radiance entering it integrated against the cosine with
     its normal over its outer hemisphere [W/m^2] (a 64 x 128 midpoint grid in (cos, phi))."""
@@ -232,8 +238,7 @@ def emit_photons(scene: Scene, count: int, rng: np.random.Generator,
     way out to the sky is blocked carries nothing). ``target``: the sphere the sun's and the
     world's photons are aimed at (``_light_fluxes``; the caustic map's
     ``specular_bounds``)."""
-    lights = [entry for entry in _light_fluxes(scene, target) if np.any(entry[1] > 0)
-              and getattr(entry[2][1], "photon_share", 1.0) > 0]
+    lights = _photon_lights(scene, target)
     if not lights or count <= 0:
         z = np.zeros((0, 3))
         return EmittedPhotons(z, z.copy(), z.copy())
@@ -1049,8 +1054,7 @@ def specular_share(scene: Scene, accel, seed: int = 0, count: int = CAUSTIC_PILO
     total = float(weight.sum())
     # The flux share is against all the lights' flux, as if no photon were aimed (the sun's
     # and the world's through the scene's whole disc).
-    everything = sum(float(flux @ LUMINANCE) for _, flux, spec in _light_fluxes(scene)
-                     if np.any(flux > 0) and getattr(spec[1], "photon_share", 1.0) > 0)
+    everything = sum(float(flux @ LUMINANCE) for _, flux, _spec in _photon_lights(scene))
     met = float(weight[passed > 0].sum())
     if not total > 0 or not everything > 0 or not met > 0:
         return 0.0, 0.0, 0.0

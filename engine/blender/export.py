@@ -137,8 +137,8 @@ from ..settings import RenderSettings
 from . import compat
 from .. import nodes
 from .. import textures
-from .world_export import (CAMERA_RAY, LIGHTING_RAY, decided_socket, decided_source,
-                           environment_of, graph_maker, light_path_outputs)
+from .world_export import (CAMERA_RAY, LIGHTING_RAY, constant_for_ray, decided_socket,
+                           decided_source, environment_of, graph_maker, light_path_outputs)
 from ..shaders import CLOSURE_KINDS, Closure, seed_reduction
 from .node_export import export_graph
 from ..scene import (AREA_SHAPES, AreaLight, Camera, Material, PointLight, Scene, SceneError,
@@ -721,13 +721,9 @@ class _NodeReader:
         if src_node.type in ("RGB", "VALUE") and hasattr(out, "default_value"):
             return convert(out.default_value)
         if self.constants is not None:
-            ray, graph_of = self.constants
-            try:
-                evaluated = nodes.evaluate(graph_of(), (src_node.name, out.identifier),
-                                           dict(ray), n=1)
-                return convert(np.asarray(evaluated, float)[0])
-            except (nodes.UnsupportedNode, nodes.MissingInput, KeyError):
-                pass
+            evaluated = constant_for_ray(src_node, out, *self.constants)
+            if evaluated is not None:
+                return convert(evaluated)
         if self.tree is not None:
             socket, reason = self._graph_socket(src_node, out)
             if socket is not None:
@@ -1189,10 +1185,8 @@ def _world_radiance(reader: _NodeReader, src, depth: int = 0) -> np.ndarray:
                 * reader.scalar(node, "Strength", default=1.0))
     if t in ("MIX_SHADER", "ADD_SHADER") and depth < 64:
         shaders = [s for s in node.inputs if s.type == "SHADER"]
-        follow = reader.source if reader.constants is None else \
-            (lambda socket: decided_source(socket, *reader.constants))
-        a = _world_radiance(reader, follow(shaders[0]), depth + 1)
-        b = _world_radiance(reader, follow(shaders[1]), depth + 1)
+        a = _world_radiance(reader, decided_source(shaders[0], *reader.constants), depth + 1)
+        b = _world_radiance(reader, decided_source(shaders[1], *reader.constants), depth + 1)
         if t == "ADD_SHADER":
             return a + b
         fac = float(np.clip(reader.scalar(node, "Fac", "Factor", default=0.5), 0, 1))

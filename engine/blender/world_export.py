@@ -75,19 +75,27 @@ def light_path_outputs(tree) -> set:
             if s.is_linked}
 
 
+def constant_for_ray(node, output, ray, graph_of):
+    """What ``node``'s ``output`` evaluates to for a ray of Light Path values ``ray``: a
+    float or an RGB (3,); None when its nodes need more than the ray (a coordinate) or are
+    not supported."""
+    try:
+        v = nodes.evaluate(graph_of(), (node.name, output.identifier), dict(ray), n=1)
+    except (nodes.UnsupportedNode, nodes.MissingInput, KeyError):
+        return None
+    return np.asarray(v, float)[0]
+
+
 def _factor(socket, ray, graph_of):
-    """A mix node's factor as one number for a ray of Light Path values ``ray``: its own
-    value, or what the nodes linked to it evaluate to; None when those need more than the
-    ray (a coordinate) or are not supported."""
+    """A mix node's factor as one number for ``ray``: its own value, or what the nodes linked
+    to it evaluate to (a colour by its luminance); None where they cannot be evaluated."""
     src = _source(socket)
     if src is None:
         return float(socket.default_value)
-    try:
-        v = nodes.evaluate(graph_of(), (src[0].name, src[1].identifier), dict(ray), n=1)
-    except (nodes.UnsupportedNode, nodes.MissingInput, KeyError):
+    v = constant_for_ray(*src, ray, graph_of)
+    if v is None:
         return None
-    v = np.asarray(v, float)
-    return float(v[0] @ nodes.LUMA if v.ndim == 2 else v[0])
+    return float(v @ nodes.LUMA if np.ndim(v) else v)
 
 
 def _mix_choice(node, ray, graph_of):
