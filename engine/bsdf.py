@@ -1088,7 +1088,7 @@ def lobe_shares(lobes, wo, n) -> np.ndarray:
 
 
 def sample_glossy(table: MaterialTable, material_ids, wo, n, rng, front=None,
-                  with_delta: bool = False, per_hit=None):
+                  with_delta: bool = False, per_hit=None, split_glass: bool = False):
     """One direction per hit on materials with glossy lobes (``table.glossy``), in the hits'
     order, grouped by material: a lobe picked in proportion to the largest channel of its
     weight x albedo(wo) (the weight with the covers of the layers above it;
@@ -1099,8 +1099,13 @@ def sample_glossy(table: MaterialTable, material_ids, wo, n, rng, front=None,
     side; ``front`` (N,) whether each hit is on the front face (glass refracts into the
     object there; None: all are). ``with_delta``: also return delta (N,), whether the picked
     lobe is a delta (a mirror or smooth glass). ``per_hit``: the hits' ``LobeInputs``
-    (per-hit Mix Shader weights and Roughness of the lobes; None: their means)."""
+    (per-hit Mix Shader weights and Roughness of the lobes; None: their means).
+    ``split_glass``: where smooth glass (``lobes.SmoothGlass``) is picked, its ray reflects
+    with weight w R F / P_lobe and a twin refracts with w T (1 - F) / P_lobe instead of one of
+    them being picked (``SmoothGlass.branches``); the twins come last in the return value, as
+    (rows (M,) into the hits, wi (M, 3), weight (M, 3)), pdf inf."""
     count = len(material_ids)
+    twins = []
     wi_out = np.zeros((count, 3))
     weight_out = np.zeros((count, 3))
     pdf_out = np.zeros(count)
@@ -1123,12 +1128,23 @@ def sample_glossy(table: MaterialTable, material_ids, wo, n, rng, front=None,
             sel = np.flatnonzero((pick == j) & (total > 0))
             if len(sel) == 0:
                 continue
-            wi, weight, pdf = lobe.subset(sel).sample(wo_h[sel], n_h[sel], u[sel])
             at = hits[sel]
+            if split_glass and hasattr(lobe, "branches"):
+                scale = w[sel] / shares[sel, j][:, None]
+                (wi, weight), (wi_t, weight_t) = lobe.subset(sel).branches(wo_h[sel], n_h[sel])
+                pdf = np.full(len(sel), np.inf)
+                through = np.flatnonzero(np.any(weight_t > 0, axis=1))
+                twins.append((at[through], wi_t[through],
+                              np.nan_to_num(weight_t[through] * scale[through])))
+            else:
+                wi, weight, pdf = lobe.subset(sel).sample(wo_h[sel], n_h[sel], u[sel])
             wi_out[at] = wi
             weight_out[at] = np.nan_to_num(weight * w[sel] / shares[sel, j][:, None])
             pdf_out[at] = pdf * shares[sel, j]
             delta_out[at] = delta
-    if with_delta:
-        return wi_out, weight_out, pdf_out, delta_out
-    return wi_out, weight_out, pdf_out
+    result = (wi_out, weight_out, pdf_out) + ((delta_out,) if with_delta else ())
+    if split_glass:
+        rows = [np.concatenate(parts) for parts in zip(*twins)] if twins else [
+            np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3))]
+        result += (tuple(rows),)
+    return result

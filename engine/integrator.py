@@ -92,6 +92,9 @@ TEXTURE_SUPERSAMPLES = 7
 # A bounce whose new direction has this cosine or more with the old one went on straight
 # (a transparent surface): the ray stays a camera ray (``scene.World.camera``).
 STRAIGHT_ON = 1.0 - 1e-5
+# Camera-path vertices below this depth split smooth glass into a reflected and a refracted
+# ray (``_GlossyHits.sample``); deeper ones pick one by its Fresnel share, as Cycles does.
+GLASS_SPLIT_DEPTH = 2
 
 # How glossy lobes take the light of the lights their own rays meet (area lights, lights with
 # a radius, emissive meshes, the world): "mis", both strategies weighted by the power
@@ -337,6 +340,8 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
     # transparent surfaces only, which keep Cycles' camera flag.
     track_camera = scene.world.camera is not None
     camera_rays = cam = None
+    # Per ray after the first bounce, with the light passes: its path's first-bounce kind.
+    path_kind = kinds = None
     if photon is not None and photon.lookups < spp:
         first_lookup = rng.integers(0, spp, pixels)
     # Emitter edges: their camera-seen emission is estimated apart (``edge_emission``).
@@ -373,7 +378,7 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
                                                directions[seen])[:, None]
                 add_to_pixels(emission_sums, ray_of[seen] // spp, value)
                 if light is not None:
-                    light.add(ray_of[seen], value, direct=depth == 1)
+                    light.add(ray_of[seen], value, direct=depth == 1, kind=path_kind[seen])
         all_hit = bool(hit.all())
         seen_world = None
         if not all_hit:
@@ -395,7 +400,7 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
                 if depth == 0:
                     light.add_seen(ray_of[~hit], missed, world=True)
                 else:
-                    light.add(ray_of[~hit], missed, direct=depth == 1)
+                    light.add(ray_of[~hit], missed, direct=depth == 1, kind=path_kind[~hit])
         if not hit.any():
             break
         if not all_hit:
@@ -404,12 +409,14 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
             thr = None if throughput is None else throughput[hit]
             probing = None if probes is None else probes[hit]
             cam = None if camera_rays is None else camera_rays[hit]
+            kinds = None if path_kind is None else path_kind[hit]
             if mis_pdf is not None:
                 mis_pdf, mis_x, mis_n = mis_pdf[hit], mis_x[hit], mis_n[hit]
         else:
             t_hit, d, o, rays, thr = _t, directions, origins, ray_of, throughput
             probing = probes
             cam = camera_rays
+            kinds = path_kind
         # Samples in order (primary rays, all hit): pixel sums need no index.
         in_order = depth == 0 and all_hit
         pixel_of = None if in_order else rays // spp
@@ -436,7 +443,7 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
                 if depth == 0:
                     light.add_seen(rays, emitted if thr is None else thr * emitted, world=False)
                 else:
-                    light.add(rays, thr * emitted, direct=depth == 1)
+                    light.add(rays, thr * emitted, direct=depth == 1, kind=kinds)
         if probing is not None and probing.any() and probe_lookup:
             # Emission probes from glossy hits where the path ended: the radiance of the
             # surface they meet is the glossy lobe's indirect light (one final-gather ray of
@@ -460,7 +467,7 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
                               * surface.translucent[met] / np.pi)
                 add_to_pixels(indirect_sums, rays[met] // spp, value)
                 if light is not None:
-                    light.add(rays[met], value, direct=False)
+                    light.add(rays[met], value, direct=False, kind=kinds[met])
         if probing is not None and probing.any():
             shaded = np.flatnonzero(~probing)
             if len(shaded) == 0:
@@ -471,6 +478,7 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
             surface = surface.subset(shaded)
             pixel_of = rays // spp
             cam = None if cam is None else cam[shaded]
+            kinds = None if kinds is None else kinds[shaded]
 
         # A node-driven Normal (a Normal Map) shades what the camera path computes here:
         # direct light and the glossy and glass lobes; the indirect estimates (cache, gather,
@@ -522,29 +530,30 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
                     usage[:, 1] += np.bincount(owner[~covered], minlength=len(usage))
                 e *= (spp / min(photon.lookups, spp))
                 _add_irradiance(e, ask, surface, glossy, thr, rays, spp, depth, indirect_sums,
-                                light, direct_light and not probe_lookup, rough)
+                                light, direct_light and not probe_lookup, rough, kinds)
         if idx is not None and direct_light and context.caustics is not None:
             _shade_caustics(context, stats, idx, x, ns_smooth, surface, glossy, thr, rays, spp,
-                            depth, indirect_sums, light, probe_lookup, rough)
+                            depth, indirect_sums, light, probe_lookup, rough, kinds)
         if idx is not None and direct_light:
             layer = None if glossy is None else glossy.diffuse_factor
             lambert = idx
             if rough is not None:
                 every = np.arange(len(x)) if isinstance(idx, slice) else idx
                 _shade_direct_rough(context, stats, rng, depth, every[rough.row_of[every] >= 0],
-                                    x, ns, ng, thr, rays, direct_sums, layer, light, rough)
+                                    x, ns, ng, thr, rays, direct_sums, layer, light, rough,
+                                    kinds)
                 lambert = every[rough.row_of[every] < 0]
             if isinstance(lambert, slice) or len(lambert):
                 _shade_direct(context, stats, rng, depth, lambert, x, ns, ng, surface, thr,
-                              rays, pixel_of, direct_sums, layer, light)
+                              rays, pixel_of, direct_sums, layer, light, kinds)
         if glossy is not None:
             _shade_glossy_direct(context, stats, rng, glossy, x, ns, ng, thr, rays, spp,
-                                 direct_sums, light, depth)
+                                 direct_sums, light, depth, kinds)
         if materials.has_translucent:
             _shade_translucent(context, stats, rng, depth, x, ns, ns_smooth, ng, surface, thr,
                                rays, spp, parts, light,
                                None if photon is None or photon.lookups >= spp
-                               else first_lookup)
+                               else first_lookup, kinds)
 
         if not follows:
             break
@@ -559,16 +568,21 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
         idx = np.nonzero(mirror)[0]
         directions, weight, mis_pdf = surface.subset(idx).bsdf().mirror.sample(-d[idx], ns[idx])
         if glossy is not None:
-            g_dirs, g_weight, g_keep, g_pdf = glossy.sample(rng)
-            stats["glossy_rays"] += glossy.count
+            # Smooth glass seen first splits: one ray reflects, one refracts, each with its
+            # Fresnel share, so that a light's glint in the glass (a few percent reflected,
+            # picked by a few percent of the samples) is not a scatter of fireflies.
+            g_dirs, g_weight, g_keep, g_pdf = glossy.sample(
+                rng, split_glass=depth < GLASS_SPLIT_DEPTH)
+            glossy_index = np.concatenate([glossy.index, glossy.index[glossy.twin_of]])
+            stats["glossy_rays"] += len(glossy_index)
             mirrors = len(idx)
             keep = np.concatenate([np.ones(mirrors, bool), g_keep])
-            idx = np.concatenate([idx, glossy.index])[keep]
+            idx = np.concatenate([idx, glossy_index])[keep]
             directions = np.concatenate([directions, g_dirs.astype(directions.dtype)])[keep]
             weight = np.concatenate([weight, g_weight])[keep]
             mis_pdf = np.concatenate([mis_pdf, g_pdf])[keep]
             probes = np.concatenate([np.zeros(mirrors, bool),
-                                     ~glossy.goes_on[glossy.index]])[keep]
+                                     ~glossy.goes_on[glossy_index]])[keep]
         else:
             probes = None
         if len(idx) == 0:
@@ -581,11 +595,15 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
         if track_camera:
             was = np.ones(len(idx), bool) if depth == 0 else cam[idx]
             camera_rays = was & (sampling.dot_rows(directions, d[idx]) > STRAIGHT_ON)
-        if light is not None and depth == 0:
-            # The first bounce's kind: through the surface (glass refracting) Transmission,
-            # else (mirror, glossy lobes, glass reflecting) Glossy.
-            through = sampling.dot_rows(directions, ns[idx]) < 0
-            light.kind_of[ray_of] = np.where(through, TRANSMISSION, GLOSSY)
+        if light is not None:
+            # Each path's first bounce's kind (the passes its later light goes to): through
+            # the surface (glass refracting) Transmission, else (mirror, glossy lobes, glass
+            # reflecting) Glossy; kept per ray, as a split sample has one path of each.
+            if depth == 0:
+                through = sampling.dot_rows(directions, ns[idx]) < 0
+                path_kind = np.where(through, TRANSMISSION, GLOSSY).astype(np.int8)
+            else:
+                path_kind = kinds[idx]
 
     if edge_pixels is not None:
         seen, traced = edge_emission(context, camera, batch, edge_pixels,
@@ -733,7 +751,7 @@ def edge_emission(context: CameraContext, camera, batch: int, pixels: np.ndarray
 
 
 def _shade_caustics(context, stats, idx, x, ns, surface, glossy, thr, rays, spp, depth,
-                    indirect_sums, light=None, probe_lookup=False, rough=None):
+                    indirect_sums, light=None, probe_lookup=False, rough=None, kinds=None):
     """Caustics at the diffuse hits ``idx``: the caustic map's irradiance (light that reached
     them through specular surfaces, ``indirect.CausticEstimate``) x rho_d / pi (below a
     Principled layer: x its diffuse share), plus, at glossy hits where the path ends and no
@@ -748,7 +766,7 @@ def _shade_caustics(context, stats, idx, x, ns, surface, glossy, thr, rays, spp,
     if len(lit) == 0:
         return
     _add_irradiance(e[lit], ask[lit], surface, glossy, thr, rays, spp, depth, indirect_sums,
-                    light, not probe_lookup, rough)
+                    light, not probe_lookup, rough, kinds)
 
 
 def _asking(candidates, samples, spp, first_lookup, lookups):
@@ -760,7 +778,7 @@ def _asking(candidates, samples, spp, first_lookup, lookups):
 
 
 def _shade_translucent(context, stats, rng, depth, x, ns, ns_smooth, ng, surface, thr, rays,
-                       spp, parts, light, first_lookup):
+                       spp, parts, light, first_lookup, kinds=None):
     """Translucent closures (Cycles' Translucent BSDF, f = rho_t / pi for light from the far
     side) at a camera-path vertex: rho_t / pi x the irradiance on the far side, the side
     whose normal is -n, estimated as at any diffuse point facing that way: direct light by
@@ -777,7 +795,7 @@ def _shade_translucent(context, stats, rng, depth, x, ns, ns_smooth, ng, surface
     factor = surface.translucent[on] / np.pi
     if depth > 0:
         factor = factor * thr[on]
-    kind = DIFFUSE if depth == 0 else None
+    kind = DIFFUSE if depth == 0 or light is None else kinds[on]
     back_x = x[on]
     if context.settings.mode == "full":
         terms = _counted_direct_terms(context, stats, rng, back_x, -ns[on], -ng[on])
@@ -809,11 +827,11 @@ def _shade_translucent(context, stats, rng, depth, x, ns, ns_smooth, ng, surface
     value = e * (spp / min(photon.lookups, spp)) * factor[ask]
     add_to_pixels(indirect_sums, rays[at] // spp, value)
     if light is not None:
-        light.add(rays[at], value, direct=False, kind=kind)
+        light.add(rays[at], value, direct=False, kind=kind if depth == 0 else kind[ask])
 
 
 def _add_irradiance(e, at, surface, glossy, thr, rays, spp, depth, indirect_sums, light,
-                    glossy_part, rough=None):
+                    glossy_part, rough=None, kinds=None):
     """Irradiance ``e`` (k, 3) at the diffuse hits ``at`` into the Indirect part: x rho_d / pi
     (below a Principled layer x its diffuse share) and, with ``glossy_part``, plus the glossy
     lobes' albedo / pi at hits where the path ends (their indirect light as if it came
@@ -840,7 +858,7 @@ def _add_irradiance(e, at, surface, glossy, thr, rays, spp, depth, indirect_sums
     if depth > 0:
         value *= thr[at]
         if light is not None:
-            light.add(rays[at], value, direct=False)
+            light.add(rays[at], value, direct=False, kind=kinds[at])
     add_to_pixels(indirect_sums, rays[at] // spp, value)
 
 
@@ -860,7 +878,7 @@ def _counted_direct_terms(context, stats, rng, x, ns, ng, with_directions=False)
 
 
 def _shade_direct_rough(context, stats, rng, depth, on, x, ns, ng, thr, rays, direct_sums,
-                        diffuse_factor, light, rough):
+                        diffuse_factor, light, rough, kinds=None):
     """Direct light at the Oren-Nayar hits ``on`` (indices among the vertex's hits): each
     light sample weighted by the lobe's f(wo, wi) (``bsdf.RoughDiffuseHits``) instead of
     rho / pi; below a Principled layer x its diffuse share; summed as ``_shade_direct``
@@ -885,11 +903,12 @@ def _shade_direct_rough(context, stats, rng, depth, on, x, ns, ng, thr, rays, di
     spp = context.settings.samples
     add_to_pixels(direct_sums, rays[on] // spp, radiance)
     if light is not None:
-        light.add(rays[on], radiance, direct=depth == 0, kind=DIFFUSE if depth == 0 else None)
+        light.add(rays[on], radiance, direct=depth == 0,
+                  kind=DIFFUSE if depth == 0 else kinds[on])
 
 
 def _shade_direct(context, stats, rng, depth, idx, x, ns, ng, surface, thr, rays, pixel_of,
-                  direct_sums, diffuse_factor=None, light=None):
+                  direct_sums, diffuse_factor=None, light=None, kinds=None):
     """Direct light at the diffuse hits ``idx``: rho_d / pi times the irradiance of
     ``direct.direct_terms``, summed into the pixels (and into ``light``'s passes: Diffuse
     Direct at the first hit, the path's kind's Indirect after). Primary hits of a scene whose materials
@@ -939,7 +958,8 @@ def _shade_direct(context, stats, rng, depth, idx, x, ns, ng, surface, thr, rays
         in_order = pixel_of is None and isinstance(idx, slice)
         add_to_pixels(direct_sums, None if in_order else (rays // spp)[idx], e)
         if light is not None:
-            light.add(rays[idx], e, direct=depth == 0, kind=DIFFUSE if depth == 0 else None)
+            light.add(rays[idx], e, direct=depth == 0,
+                      kind=DIFFUSE if depth == 0 else kinds[idx])
 
 
 class _GlossyHits:
@@ -1014,18 +1034,27 @@ class _GlossyHits:
                     self.transmitted[hits] += w * t
                 self.ending_transmitted[hits] = self.transmitted[hits] * ~goes_on[:, None]
 
-    def sample(self, rng):
+    def sample(self, rng, split_glass: bool = False):
         """One ray per glossy hit, in the order of ``index`` (``bsdf.sample_glossy``):
         returns (directions, weight = w f cos / (pdf P), kept, pdf) where ``pdf`` is P x the
         picked lobe's density (inf for a mirror or smooth glass), the BSDF's side of multiple
         importance sampling for the lights the ray meets. From hits where the path ends the
-        ray is an emission probe."""
-        wi, weight, pdf = sample_glossy(self.materials, self.material_ids,
-                                        self.wo[self.index].astype(np.float64),
-                                        self.n[self.index].astype(np.float64), rng,
-                                        self.front[self.index],
-                                        per_hit=None if self.per_hit is None
-                                        else self.per_hit[self.index])
+        ray is an emission probe. ``split_glass``: smooth glass sends a reflected and a
+        refracted ray (``sample_glossy``'s twins, appended after the G rays; ``twin_of``
+        (M,) then holds their positions in ``index``)."""
+        sampled = sample_glossy(self.materials, self.material_ids,
+                                self.wo[self.index].astype(np.float64),
+                                self.n[self.index].astype(np.float64), rng,
+                                self.front[self.index],
+                                per_hit=None if self.per_hit is None
+                                else self.per_hit[self.index], split_glass=split_glass)
+        wi, weight, pdf = sampled[:3]
+        self.twin_of = np.zeros(0, np.int64)
+        if split_glass:
+            self.twin_of, twin_wi, twin_weight = sampled[3]
+            wi = np.concatenate([wi, twin_wi])
+            weight = np.concatenate([weight, twin_weight])
+            pdf = np.concatenate([pdf, np.full(len(self.twin_of), np.inf)])
         return wi, weight, np.any(weight > 0, axis=1) & (pdf > 0), pdf
 
     def radiance(self, target, directions, p_light=None, meets=None):
@@ -1067,7 +1096,7 @@ class _GlossyHits:
 
 
 def _shade_glossy_direct(context, stats, rng, glossy, x, ns, ng, thr, rays, spp, direct_sums,
-                         light=None, depth=0):
+                         light=None, depth=0, kinds=None):
     """Direct light reflected by the glossy lobes: light samples at the glossy hits
     (``direct.direct_terms`` with their directions), each weighted by the lobes' f and, for
     lights the lobes' rays meet as well, by the light's weight of multiple importance sampling
@@ -1107,7 +1136,8 @@ def _shade_glossy_direct(context, stats, rng, glossy, x, ns, ng, thr, rays, spp,
         radiance *= thr[idx]
     add_to_pixels(direct_sums, rays[idx] // spp, radiance)
     if light is not None:
-        light.add(rays[idx], radiance, direct=depth == 0, kind=GLOSSY if depth == 0 else None)
+        light.add(rays[idx], radiance, direct=depth == 0,
+                  kind=GLOSSY if depth == 0 else kinds[idx])
 
 
 def _first_hit_colors(light, rays, surface, glossy):

@@ -474,6 +474,20 @@ class SmoothGlass:
         weight = np.where((c > 0)[:, None], np.nan_to_num(weight), 0.0)
         return wi, weight, np.where(c > 0, np.inf, 0.0)
 
+    def branches(self, wo, n):
+        """Both of ``sample``'s outcomes at once (splitting instead of picking):
+        ((wi_reflected, R F), (wi_refracted, T (1 - F))), each (N, 3); their weights sum to
+        ``albedo``, so one ray down each branch is ``sample``'s expectation without the pick's
+        variance. Under total internal reflection the refracted weight is 0."""
+        c = np.clip(_dot(wo, n), 0.0, 1.0)
+        _, cos_t = fresnel_module.dielectric(c, self.eta)
+        F = self.fresnel.reflectance(c)
+        facing = (c > 0)[:, None]
+        reflected = 2.0 * c[:, None] * n - wo
+        refracted = -wo / self.eta[:, None] + (c / self.eta - cos_t)[:, None] * n
+        return ((reflected, np.where(facing, F * self.reflection_tint, 0.0)),
+                (refracted, np.where(facing, (1.0 - F) * self.transmission_tint, 0.0)))
+
     def albedo(self, wo, n):
         F = self.fresnel.reflectance(np.clip(_dot(wo, n), 0.0, 1.0))
         return F * self.reflection_tint + (1.0 - F) * self.transmission_tint

@@ -346,8 +346,9 @@ def cache_usage_image(usage: np.ndarray | None, shape) -> np.ndarray:
 class LightSums:
     """One camera batch's sums for the light passes: ``light`` (kind, Direct/Indirect,
     pixels, 3), ``color`` (kind, pixels, 3), ``emit`` and ``env`` (pixels, 3); each
-    contribution added per sample (pixel = sample // samples). ``kind_of`` (samples,) is
-    each path's first-bounce kind, set when the path leaves its first hit."""
+    contribution added per sample (pixel = sample // samples), to the kind its caller names
+    (after the first bounce, each path's first-bounce kind, which the integrator carries per
+    ray: a sample split at smooth glass has a reflected and a refracted path)."""
 
     def __init__(self, pixels: int, samples: int):
         self.samples = samples
@@ -355,23 +356,22 @@ class LightSums:
         self.color = np.zeros((3, pixels, 3))
         self.emit = np.zeros((pixels, 3))
         self.env = np.zeros((pixels, 3))
-        self.kind_of = np.zeros(pixels * samples, np.int8)
 
     def _add(self, target, sample, values):
         pixel = np.asarray(sample) // self.samples
         for c in range(3):
             target[:, c] += np.bincount(pixel, weights=values[:, c], minlength=len(target))
 
-    def add(self, sample, values, direct: bool, kind=None):
-        """Add ``values`` (n, 3) of samples ``sample`` (n,) to Direct (``direct``) or
-        Indirect of ``kind`` (an int for all) or, None, of each path's own ``kind_of``."""
+    def add(self, sample, values, direct: bool, kind):
+        """Add ``values`` (n, 3) of samples ``sample`` (n,) to the Direct (``direct``) or
+        Indirect pass of ``kind``: an int for all, or (n,) one per value."""
         slot = DIRECT if direct else INDIRECT
         if len(values) == 0:
             return
-        if kind is not None:
+        if np.ndim(kind) == 0:
             self._add(self.light[kind, slot], sample, values)
             return
-        kinds = self.kind_of[sample]
+        kinds = np.asarray(kind)
         for k in range(3):
             sel = kinds == k
             if sel.any():

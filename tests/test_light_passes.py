@@ -17,13 +17,15 @@ Direct, Indirect and Color, with Emit and Env (``engine/passes.py``).
 * **Glass slab** (``test_glass.slab_scene``), smooth, IOR 1.5, seen through a 1-degree camera.
   At 75 degrees with the emissive plane on the camera's side: GlossCol = F and TransCol =
   1 - F exactly (smooth glass: F and 1 - F, white tints); the plane seen in the front face's
-  reflection is Glossy Direct (GlossDir x GlossCol = F: the share of paths that picked the
-  reflection, binomial, 1.3 % relative SD at 64 spp, bound 5 %), the light that went in and
-  came back is Transmission Indirect, summing with it to the closed form 2F / (1 + F)
-  (binomial: 0.6 % SD, bound 3 %). Head-on
-  with the plane behind: all light is Transmission Indirect, (1 - F) / (1 + F) (0.3 % SD).
-  Planted bugs (each fails here): the glass's albedo all in TransCol (TransCol = 1, not
-  0.96); Direct taken one bounce late (the reflection in GlossInd).
+  reflection is Glossy Direct, GlossDir x GlossCol = F (+0.036 % at seeds 1-4: the camera
+  splits smooth glass at its first two vertices, ``integrator.GLASS_SPLIT_DEPTH``, so each
+  sample sends one ray down each branch; bound 0.2 %), the light that went in and came back
+  is Transmission Indirect, summing with it to the closed form 2F / (1 + F) (seeds 1-4: within
+  0.17 %, bound 0.5 %). Head-on with the plane behind: all light is Transmission Indirect,
+  (1 - F) / (1 + F) (within 0.01 %, bound 3 %). Planted bugs (each fails here): the glass's
+  albedo all in TransCol (TransCol = 1, not 0.96); Direct taken one bounce late (the
+  reflection in GlossInd); no split (a branch picked by its Fresnel share, as Cycles does:
+  the reflection 0.7-3.4 % off at seeds 1-4, the sum 0.6-2.0 %).
 """
 import numpy as np
 import pytest
@@ -148,9 +150,9 @@ def test_glass_slab_light_is_glossy_and_transmission(theta, lamp_side):
     assert np.all(p["TransDir"] == 0)           # the plane is two crossings away
     if lamp_side == "front":
         reflected = p["GlossDir"] * p["GlossCol"]
-        np.testing.assert_allclose(reflected, F, rtol=0.05)
+        np.testing.assert_allclose(reflected, F, rtol=2e-3)
         assert np.all(p["GlossInd"] == 0)
-        np.testing.assert_allclose(reflected + through, 2 * F / (1 + F), rtol=0.03)
+        np.testing.assert_allclose(reflected + through, 2 * F / (1 + F), rtol=5e-3)
     else:
         assert np.all(p["GlossDir"] == 0) and np.all(p["GlossInd"] == 0)
         np.testing.assert_allclose(through, (1 - F) / (1 + F), rtol=0.03)

@@ -369,6 +369,18 @@ def test_delta_lobes():
     wi, weight, _ = tinted.sample(wo, n, rng.random((count, 3)))
     np.testing.assert_allclose(weight.mean(axis=0), tinted.albedo(wo[:1], n[:1])[0],
                                atol=0.01)
+    # Split (the camera's first vertices): both branches at once, along sample's directions,
+    # weights R F and T (1 - F) (summing to the albedo); the refracted one 0 under TIR.
+    (w_r, r_weight), (w_t, t_weight) = tinted.branches(wo, n)
+    drawn_wi, _, _ = tinted.sample(wo, n, rng.random((count, 3)))
+    up = (drawn_wi @ N_AXIS) > 0
+    np.testing.assert_allclose(w_r[up], drawn_wi[up], atol=1e-12)
+    np.testing.assert_allclose(w_t[~up], drawn_wi[~up], atol=1e-12)
+    np.testing.assert_allclose(r_weight, F * 0.5)
+    np.testing.assert_allclose(t_weight, _tile((1 - F) * np.array([0.2, 0.9, 0.4]), count))
+    np.testing.assert_allclose(r_weight + t_weight, tinted.albedo(wo, n))
+    (w_r, r_weight), (_, t_weight) = inside.branches(_tile(_view(0.3)[0], count), n)
+    assert np.all((w_r @ N_AXIS) > 0) and np.allclose(r_weight, 1.0) and np.all(t_weight == 0)
     # Rough glass of index 1 is a pass-through (Cycles' singular case), weight 1.
     index_one = L.MicrofacetGlass(np.full(count, 0.3), 1.0)
     wi, weight, pdf = index_one.sample(wo, n, rng.random((count, 3)))
