@@ -616,7 +616,8 @@ class GlassLobe:
     ``DELTA_ALPHA2``) with index ``ior`` inside over outside: a hit on the front face (the
     ray arriving from outside) refracts with eta = ior, one on the back face with 1 / ior.
     ``reflection_tint`` / ``transmission_tint`` (3,) colour the two branches; ``f0`` (3,) is
-    the Principled remap of the Fresnel (None: the exact dielectric). Light samples reach only
+    the Principled remap of the Fresnel (None: the exact dielectric); ``film_thickness`` [nm]
+    and ``film_ior`` a thin film over it (Cycles' interference: ``lobes._glass_fresnel``). Light samples reach only
     its reflection side (a light behind glass is not reachable by a shadow ray, in Cycles
     too); what it transmits of a light comes through its own rays."""
 
@@ -632,6 +633,8 @@ class GlassLobe:
     roughness_map: tuple | None = None      # ("glass",): alpha = Roughness^2
     metal_part: str | None = None           # "dielectric" in a Principled BSDF
     metallic_mean: float = 0.0
+    film_thickness: float = 0.0             # Thin Film Thickness [nm]; 0: no film
+    film_ior: float = 1.33                  # Thin Film IOR
     transmits = True
 
     @property
@@ -641,17 +644,25 @@ class GlassLobe:
     def at(self, count: int, front=None, roughness=None, base=None):
         """The lobe at ``count`` hits; ``roughness`` as ``GlossyLobe.at`` (``base``, the
         Base Color per hit, is not read: the transmission tint keeps its mean)."""
-        eta = np.full(count, float(self.ior)) if front is None else \
-            np.where(np.asarray(front, bool), float(self.ior), 1.0 / float(self.ior))
+        front = np.ones(count, bool) if front is None else np.asarray(front, bool)
+        eta = np.where(front, float(self.ior), 1.0 / float(self.ior))
+        film = None
+        if self.film_thickness > 0:
+            # Cycles: the film's index over the side the light comes from (a back face
+            # divides it by the bulk index).
+            film = (np.full(count, self.film_thickness),
+                    np.where(front, self.film_ior, self.film_ior / float(self.ior)))
         if self.delta:
-            return SmoothGlass(eta, self.reflection_tint, self.transmission_tint, self.f0)
+            return SmoothGlass(eta, self.reflection_tint, self.transmission_tint, self.f0,
+                               film)
         alpha = np.full(count, float(self.alpha))
         if roughness is not None and self.roughness_map is not None:
             given = ~np.isnan(roughness)
             r = np.clip(np.where(given, roughness, 0.0), 0.0, 1.0)
             alpha = np.where(given, np.maximum(r * r, MIN_TEXTURED_ALPHA), alpha)
         return MicrofacetGlass(alpha, eta, self.reflection_tint,
-                               self.transmission_tint, self.f0, multiscatter=self.multiscatter)
+                               self.transmission_tint, self.f0, multiscatter=self.multiscatter,
+                               film=film)
 
 
 @dataclass
@@ -873,12 +884,16 @@ def _principled_lobes(c, lobes):
         # Cycles' Principled glass: the remapped index, the tinted f0 (only where it differs
         # from the exact dielectric), the reflection untinted and sqrt(Base Color) on each
         # crossing of the surface (twice for light through a solid object).
-        plain = p["specular_ior_level"] == 0.5 and np.all(p["specular_tint"] == 1.0)
-        lobes.append(GlassLobe(weight * transmission, float(p["roughness"]) ** 2, max(eta, 1e-5),
+        # Cycles' transmission reads IOR itself: Specular IOR Level remaps the dielectric
+        # layer only (``svm/closure.h``); Specular Tint tints its f0.
+        plain = np.all(p["specular_tint"] == 1.0)
+        glass_f0 = float(fresnel_model.f0_from_ior(ior)) * np.maximum(p["specular_tint"], 0)
+        lobes.append(GlassLobe(weight * transmission, float(p["roughness"]) ** 2, ior,
                                np.ones(3), np.sqrt(np.clip(p["base_color"], 0, None)),
-                               None if plain else np.broadcast_to(tinted, (3,)).copy(),
+                               None if plain else np.broadcast_to(glass_f0, (3,)).copy(),
                                multiscatter, depth=depth, metal_part="dielectric",
-                               metallic_mean=metallic))
+                               metallic_mean=metallic, film_thickness=film,
+                               film_ior=film_ior))
     weight = weight * (1 - transmission)
     if (eta == 1.0 and not film) or not np.any(weight > 0):
         return None, tops
@@ -962,9 +977,12 @@ def glossy_material(closures) -> GlossyMaterial | None:
             # Refraction: the refracted branch alone, (1 - F) of the light.
             color = np.clip(p["color"], 0, None)
             reflection = color if c.kind == "glass" else np.zeros(3)
+            film = float(p.get("thin_film_thickness", 0.0))
+            film = film if c.kind == "glass" and film > fresnel_model.THIN_FILM_CUTOFF else 0.0
             lobes.append(GlassLobe(c.weight.copy(), float(p["roughness"]) ** 2,
                                    max(float(p["ior"]), 1e-5), reflection, color.copy(), None,
-                                   multiscatter, roughness_map=("glass",)))
+                                   multiscatter, roughness_map=("glass",), film_thickness=film,
+                                   film_ior=max(float(p.get("thin_film_ior", 1.33)), 1e-5)))
         elif c.kind == "transparent":
             # Straight through, tinted by its colour: a smooth interface of index 1 that
             # reflects nothing (Cycles' Transparent BSDF; Principled Alpha < 1 mixes one in).

@@ -296,9 +296,21 @@ def _integrate_albedo(ax, ay, fresnel, nodes=32, side=32):
 
 
 # -- Dielectric glass ----------------------------------------------------------------------------------
-def _glass_fresnel(eta, f0):
+def _glass_fresnel(eta, f0, film=None):
+    """The interface's Fresnel: the exact dielectric of ``eta``, remapped towards ``f0`` (N, 3)
+    where given, under a thin film where ``film`` = (thickness [nm] (N,), film index relative
+    to the side the light comes from (N,)) is given (Cycles' generalised Schlick with its film:
+    ``fresnel.ThinFilmDielectricFresnel``, f0 the exact F0 where not given)."""
+    if film is not None:
+        base = (np.repeat(fresnel_module.f0_from_ior(eta)[:, None], 3, axis=1) if f0 is None
+                else fresnel_module.rgb_per_hit(f0, len(eta)))
+        return fresnel_module.ThinFilmDielectricFresnel(eta, base, film[0], film[1])
     return (fresnel_module.DielectricFresnel(eta) if f0 is None
             else fresnel_module.TintedDielectricFresnel(eta, f0))
+
+
+def _film_subset(film, index):
+    return None if film is None else (film[0][index], film[1][index])
 
 
 def _reflect_probability(F, reflection_tint, transmission_tint):
@@ -313,21 +325,22 @@ class MicrofacetGlass:
     Principled BSDF's transmission."""
 
     def __init__(self, alpha, eta, reflection_tint=1.0, transmission_tint=1.0, f0=None,
-                 multiscatter=False):
+                 multiscatter=False, film=None):
         self.alpha = np.asarray(alpha, dtype=float)
         count = len(self.alpha)
         self.eta = _per_hit(eta, count)
         self.reflection_tint = fresnel_module.rgb_per_hit(reflection_tint, count)
         self.transmission_tint = fresnel_module.rgb_per_hit(transmission_tint, count)
         self.f0 = None if f0 is None else fresnel_module.rgb_per_hit(f0, count)
-        self.fresnel = _glass_fresnel(self.eta, self.f0)
+        self.film = None if film is None else (_per_hit(film[0], count), _per_hit(film[1], count))
+        self.fresnel = _glass_fresnel(self.eta, self.f0, self.film)
         self.multiscatter = _per_hit(multiscatter, count, bool)
 
     def subset(self, index):
         return MicrofacetGlass(self.alpha[index], self.eta[index], self.reflection_tint[index],
                                self.transmission_tint[index],
                                None if self.f0 is None else self.f0[index],
-                               self.multiscatter[index])
+                               self.multiscatter[index], _film_subset(self.film, index))
 
     def _scale(self, mu_o):
         out = np.ones((len(mu_o), 3))
@@ -420,8 +433,15 @@ class MicrofacetGlass:
         Glossy and Transmission Color of a glass closure)."""
         mu = np.clip(_dot(wo, n), 0.0, 1.0)
         r = np.sqrt(self.alpha)
-        R = mf.table("R", r, mu, self.eta)
         G = mf.table("G", r, mu, self.eta)
+        scale = self._scale(mu) * (mu > 0)[:, None]
+        if self.film is not None:
+            # Under a film (no tables, as in Cycles): the single-scattering total split by
+            # the smooth Fresnel at the view, F(mu_o) reflected and 1 - F(mu_o) transmitted.
+            F = self.fresnel.reflectance(mu)
+            return (F * G[:, None] * self.reflection_tint * scale,
+                    (1.0 - F) * G[:, None] * self.transmission_tint * scale)
+        R = mf.table("R", r, mu, self.eta)
         reflected = sum(coefficient * mf.table(name, r, mu, e)[:, None]
                         for coefficient, name, e in self.fresnel.table_terms())
         if self.f0 is None:
@@ -430,7 +450,6 @@ class MicrofacetGlass:
             F0 = fresnel_module.f0_from_ior(self.eta)[:, None]
             carried = (1.0 - self.f0) / np.maximum(1.0 - F0, 1e-12)
         transmitted = carried * np.clip(G - R, 0.0, None)[:, None]
-        scale = self._scale(mu) * (mu > 0)[:, None]
         return (reflected * self.reflection_tint * scale,
                 transmitted * self.transmission_tint * scale)
 
@@ -439,18 +458,20 @@ class SmoothGlass:
     """A smooth dielectric (delta): mirror reflection with probability P, refraction
     otherwise; weights R F / P and T (1 - F) / (1 - P), no eta^2 (Cycles' convention)."""
 
-    def __init__(self, eta, reflection_tint=1.0, transmission_tint=1.0, f0=None):
+    def __init__(self, eta, reflection_tint=1.0, transmission_tint=1.0, f0=None, film=None):
         self.eta = np.asarray(eta, dtype=float)
         count = len(self.eta)
         self.reflection_tint = fresnel_module.rgb_per_hit(reflection_tint, count)
         self.transmission_tint = fresnel_module.rgb_per_hit(transmission_tint, count)
         self.f0 = None if f0 is None else fresnel_module.rgb_per_hit(f0, count)
-        self.fresnel = _glass_fresnel(self.eta, self.f0)
+        self.film = None if film is None else (_per_hit(film[0], count), _per_hit(film[1], count))
+        self.fresnel = _glass_fresnel(self.eta, self.f0, self.film)
 
     def subset(self, index):
         return SmoothGlass(self.eta[index], self.reflection_tint[index],
                            self.transmission_tint[index],
-                           None if self.f0 is None else self.f0[index])
+                           None if self.f0 is None else self.f0[index],
+                           _film_subset(self.film, index))
 
     def evaluate(self, wo, wi, n):
         return np.zeros((len(wi), 3))

@@ -22,11 +22,11 @@ closure        seed material (weight w multiplies each line)
 =============  ================================================================================
 principled     rho_d = Base Color (1 - Metallic)(1 - Transmission); rho_s = Base Color x
                Metallic + sqrt(Base Color)(1 - Metallic) Transmission, the roulette's shares
-               (a thin film on the transmission and node-driven alpha: reported; a constant
+               (node-driven alpha: reported; a constant
                Alpha < 1 is exported as Cycles composes it, a Transparent closure of
                weight 1 - Alpha beside the Principled one of weight Alpha).
-               Sheen, coat, the metal, the dielectric specular layer (thin film on both
-               through the Fresnel; ``bsdf.MaterialTable.transport_*`` for photons and gather
+               Sheen, coat, the metal, the dielectric specular layer (thin film on them
+               and the transmission through the Fresnel; ``bsdf.MaterialTable.transport_*`` for photons and gather
                rays) and the transmission are rendered everywhere by their lobes
                (``bsdf.glossy_material``), layered as Cycles layers them
 diffuse        rho_d = Color (Roughness > 0: Oren-Nayar at camera hits, ``bsdf.RoughDiffuseHits``;
@@ -198,9 +198,6 @@ def _principled(c: Closure, note):
     if np.any(p["diffuse_roughness"] > 0) and metallic_max < 1 and transmission_max < 1:
         note(f"Diffuse Roughness {_fmt(np.mean(p['diffuse_roughness']))} of {name} "
              f"{OREN_NAYAR_NOTE}")
-    if np.any(p["thin_film_thickness"] > 0.1) and transmission_max > 0:
-        note(f"Thin Film of {name} is approximated: its transmission (glass) is rendered "
-             "without the film (the reflection layers have it)")
     return diffuse, specular, exitance
 
 
@@ -254,9 +251,6 @@ def seed_reduction(closures) -> SeedMaterial:
             if c.distribution not in ("", "MICROFIBER"):
                 note(f"Sheen BSDF {name}: the {c.distribution.title()} distribution is "
                      "rendered as Microfiber")
-        if c.kind == "glass" and np.any(p["thin_film_thickness"] > 0.1):
-            note(f"Thin Film of Glass BSDF {name} is ignored (the glass Fresnel has no "
-                 "interference yet)")
         diffuse = diffuse + w * d
         specular = specular + w * s
         exitance = exitance + w * e
