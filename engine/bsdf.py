@@ -62,7 +62,7 @@ from . import fresnel as fresnel_model
 from . import microfacet
 from . import sampling
 from .shaders import seed_reduction
-from .textures import MaterialTextures
+from .textures import CAMERA_FLAG, MaterialTextures
 from .lobes import (MicrofacetGlass, MicrofacetReflection, OrenNayar, Sheen, SmoothGlass,
                     SmoothReflection)
 
@@ -196,6 +196,8 @@ class MaterialTable:
         # Where no input is node-driven every parameter is one value per material: stages
         # may then work on per-material tables (the camera's histogram of direct light).
         self.constant_per_material = not self.textures.any
+        # Some material reads Light Path (Is Camera Ray): the camera tells its rays apart.
+        self.reads_light_path = bool(self.textures.light_path.any())
 
     def shading_normals(self, material_ids, prim, bu, bv, x, ns, ng, wo, front,
                         footprint=None) -> np.ndarray:
@@ -264,14 +266,15 @@ class MaterialTable:
         return out
 
     def at(self, material_ids: np.ndarray, prim=None, bu=None, bv=None,
-           directions=None) -> "SurfaceParams":
+           directions=None, camera=None) -> "SurfaceParams":
         """The parameters at hits on triangles of ``material_ids`` (N,): the one function
         through which every stage reads a material. ``prim`` (N,) the triangles and (bu, bv)
         the barycentrics of the hits: textured materials read their per-hit values there
         (without them, their means over the surface); ``directions`` (N, 3) the rays'
         (camera, gather, photon), for inputs that read the view (Fresnel, Layer Weight,
-        Geometry: ``textures.MaterialTextures.view_at``)."""
-        return SurfaceParams(self, np.asarray(material_ids), prim, bu, bv, directions)
+        Geometry: ``textures.MaterialTextures.view_at``); ``camera`` (N,) bool, the hits of
+        camera rays, for Light Path's Is Camera Ray (None: none are)."""
+        return SurfaceParams(self, np.asarray(material_ids), prim, bu, bv, directions, camera)
 
 
 # SurfaceParams slots that textures make per-hit (the rest stay per material): those of the
@@ -292,13 +295,17 @@ class SurfaceParams:
     ``exitance``, each part evaluated when one of its slots is first read)."""
 
     def __init__(self, table: MaterialTable, material: np.ndarray, prim=None, bu=None,
-                 bv=None, directions=None):
+                 bv=None, directions=None, camera=None):
         self.table = table
         self.material = material            # (N,) material ids (per-material fast paths)
         self.hits = None if prim is None or not table.textures.any else (
             np.asarray(prim), np.asarray(bu), np.asarray(bv))
         self.directions = None if directions is None or self.hits is None \
             or not table.textures.view_inputs.any() else np.asarray(directions)
+        # (N,) bool: hits of camera rays, where materials read Light Path (else None)
+        self.camera = None if camera is None or self.hits is None \
+            or not table.textures.light_path.any() else \
+            np.broadcast_to(np.asarray(camera, bool), (len(material),))
         self._cache = {}
 
     def __len__(self):
@@ -322,12 +329,18 @@ class SurfaceParams:
             yield int(material_id), np.flatnonzero(material == material_id)
 
     def _view(self, material_id: int, at):
-        """The view of hits ``at`` on ``material_id`` where its inputs read it, else None."""
-        if not self.table.textures.view_inputs[material_id]:
-            return None
-        prim, bu, bv = self.hits
-        return self.table.textures.view_at(
-            prim[at], bu[at], bv[at], None if self.directions is None else self.directions[at])
+        """The view of hits ``at`` on ``material_id`` where its inputs read it and, where they
+        read Light Path, whether each is a camera ray's (``textures.CAMERA_FLAG``); else
+        None."""
+        textures = self.table.textures
+        values = None
+        if textures.view_inputs[material_id]:
+            prim, bu, bv = self.hits
+            values = textures.view_at(prim[at], bu[at], bv[at],
+                                      None if self.directions is None else self.directions[at])
+        if textures.light_path[material_id] and self.camera is not None:
+            values = {**(values or {}), CAMERA_FLAG: self.camera[at].astype(np.float64)}
+        return values
 
     def _reflectance_slots(self) -> None:
         """The ``REFLECTANCE_SLOTS``: the per-material rows, with the rows of hits on
@@ -426,6 +439,7 @@ class SurfaceParams:
         if self.hits is not None:
             out.hits = tuple(h[index] for h in self.hits)
             out.directions = None if self.directions is None else self.directions[index]
+            out.camera = None if self.camera is None else self.camera[index]
             out._cache = {k: v[index] for k, v in self._cache.items() if k in TEXTURED_SLOTS}
         return out
 

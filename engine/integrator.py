@@ -335,10 +335,11 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
     # Rays after a bounce see the lights that are not geometry (area lights, lights with a
     # radius: ``lights.ray_visible``).
     ray_lights = any(ray_visible(light) for light in context.lights.sampled)
-    # Where the world's nodes tell camera rays apart (``World.camera``), each ray after the
-    # first hit carries whether it is still a camera ray: it went on straight through
-    # transparent surfaces only, which keep Cycles' camera flag.
-    track_camera = scene.world.camera is not None
+    # Where the world's or a material's nodes tell camera rays apart (``World.camera``,
+    # Light Path Is Camera Ray), each ray after the first hit carries whether it is still a
+    # camera ray: it went on straight through transparent surfaces only, which keep Cycles'
+    # camera flag.
+    track_camera = scene.world.camera is not None or materials.reads_light_path
     camera_rays = cam = None
     # Per ray after the first bounce, with the light passes: its path's first-bounce kind.
     path_kind = kinds = None
@@ -423,7 +424,7 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
         x = sampling.scale_rows(d, t_hit)
         x += o
         ng, ns, front = surfaces.normals(prim, bu, bv, d)
-        surface = surfaces.params(prim, bu, bv, d)
+        surface = surfaces.params(prim, bu, bv, d, True if depth == 0 else cam)
         if depth == 0 and not materials.constant_per_material:
             t0 = time.perf_counter()
             supersample_textures(context, camera, batch, surface, prim, rays, spp, stats)
@@ -677,8 +678,9 @@ def world_along(world, directions: np.ndarray, camera) -> np.ndarray | None:
 
 
 def _seen_emission(scene, accel, surfaces, origins, directions, tmax, split=False):
-    """Radiance (N, 3) the rays see first: an emitter's (on its emitting side) or the world's
-    where they miss; 0 on other surfaces. ``split``: also the world's part alone."""
+    """Radiance (N, 3) the camera rays see first: an emitter's (on its emitting side, as a
+    camera ray meets it) or the world's where they miss; 0 on other surfaces. ``split``:
+    also the world's part alone."""
     _t, prim, bu, bv = accel.intersect(origins, directions, tmax)
     out = np.zeros((len(origins), 3))
     hit = prim >= 0
@@ -690,7 +692,7 @@ def _seen_emission(scene, accel, surfaces, origins, directions, tmax, split=Fals
         p = prim[hit]
         front = sampling.dot_rows(np.take(surfaces.geometric_normals, p, axis=0),
                                   directions[hit]) < 0
-        surface = surfaces.params(p, bu[hit], bv[hit], directions[hit])
+        surface = surfaces.params(p, bu[hit], bv[hit], directions[hit], camera=True)
         out[hit] = surface.emitted_radiance * (front | surface.both_sides)[:, None]
     if split:
         return out, np.where(hit[:, None], 0.0, out)
@@ -724,7 +726,8 @@ def supersample_textures(context: CameraContext, camera, batch: int, surface, pr
     total = np.array(surface.diffuse[textured], np.float64)
     counts = np.ones(len(textured))
     if same.any():
-        extra = context.surfaces.params(p2[same], u2[same], v2[same], directions[same]).diffuse
+        extra = context.surfaces.params(p2[same], u2[same], v2[same], directions[same],
+                                        camera=True).diffuse
         slot = np.searchsorted(textured, owner[same])
         np.add.at(total, slot, extra)
         counts += np.bincount(slot, minlength=len(textured))

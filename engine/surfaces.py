@@ -37,10 +37,12 @@ class SceneSurfaces:
             if not np.any(np.abs(agree) < 0.99999):
                 self.shading_normals = None
 
-    def params(self, prim: np.ndarray, bu=None, bv=None, directions=None) -> SurfaceParams:
+    def params(self, prim: np.ndarray, bu=None, bv=None, directions=None,
+               camera=None) -> SurfaceParams:
         """Material parameters at hits on triangles ``prim`` with barycentrics (bu, bv) of
-        rays along ``directions`` (for inputs that read the view; ``MaterialTable.at``)."""
-        return self.materials.at(self.material_ids[prim], prim, bu, bv, directions)
+        rays along ``directions`` (for inputs that read the view), ``camera`` (N,) bool where
+        they are camera rays' (Light Path's Is Camera Ray; ``MaterialTable.at``)."""
+        return self.materials.at(self.material_ids[prim], prim, bu, bv, directions, camera)
 
     def normals(self, prim, bu, bv, d):
         """(ng, ns, front) at hits of rays ``d`` (module docstring)."""

@@ -51,6 +51,16 @@ What follows the texture at each hit, and what takes its mean
     roughness, Fresnel, tints) use the mean of their node-driven inputs, and emissive meshes are sampled as lights by their mean exitance;
     export names every such input in a warning (:func:`approximations`).
 
+Light Path in a material: Is Camera Ray tells camera rays (the camera path's hits, also those
+gone straight on through transparent surfaces, as Cycles keeps the flag) from all others
+(photons, gather rays, cache records, light samples of emitters, reflections). Materials
+whose node-driven inputs read a Light Path node (``light_path``) are evaluated with
+``CAMERA_FLAG`` in their hit values: 1 where the caller says the hit is a camera ray's
+(``bsdf.SurfaceParams(camera=...)``), 0 elsewhere; a mixed weight's mean is the larger of its
+means for the two kinds of ray (so that the lobe exists for both and the per-hit ratio picks
+it), the other inputs' means are a lighting ray's. Light Path's other outputs keep a camera
+ray's values (export names them).
+
 Conversions follow Cycles: a colour feeding a number by its luminance (``nodes.LUMA``), a
 vector by the mean of its components, a number feeding a colour on all three channels.
 Numbers are clipped to the ranges export clips the socket values to (``PARAM_RANGES``).
@@ -66,7 +76,7 @@ from .shaders import CLOSURE_KINDS, seed_reduction
 
 __all__ = ["MaterialTextures", "HitInputs", "approximations", "interpolate_corners",
            "WEIGHT", "COMPLEMENT", "WEIGHT_EXACT_KINDS", "default_weight", "weight_at",
-           "lookups_per_hit", "EMISSION_PARAMS", "MEAN_SAMPLES",
+           "lookups_per_hit", "EMISSION_PARAMS", "MEAN_SAMPLES", "CAMERA_FLAG",
            "PARAM_RANGES", "EXACT_PARAMS", "PER_TRIANGLE"]
 
 # Area-uniform points per textured material for the means the lobes use.
@@ -116,6 +126,9 @@ WEIGHT_EXACT_KINDS = ("diffuse", "emission", "translucent")
 # docstring: "incoming", "normal_world", ...): materials whose inputs read them are evaluated
 # with the hit's own ray (``MaterialTextures.view_at``).
 VIEW_NODES = ("ShaderNodeFresnel", "ShaderNodeLayerWeight", "ShaderNodeNewGeometry")
+# The hit value that tells a camera ray's hit (1) from any other ray's (0) to Light Path's Is
+# Camera Ray (``nodes`` module docstring: ``"ray:<output>"``).
+CAMERA_FLAG = "ray:Is Camera Ray"
 
 # Closure kinds whose lobes take a node-driven Roughness per hit (``bsdf.LobeInputs``).
 LOBE_ROUGHNESS = ("glossy", "metallic", "glass", "refraction", "principled")
@@ -240,8 +253,9 @@ def _upstream(graph, node: str) -> set:
     return seen
 
 
-def _reads_view(material, graph) -> bool:
-    """Whether any node-driven input of ``material`` reads a ``VIEW_NODES`` node."""
+def _reads_view(material, graph, kinds=VIEW_NODES) -> bool:
+    """Whether any node-driven input of ``material`` reads a node of ``kinds`` (by default
+    the ``VIEW_NODES``)."""
     if graph is None:
         return False
     upstream = set()
@@ -250,7 +264,7 @@ def _reads_view(material, graph) -> bool:
             for socket, _constant in factors:
                 if socket is not None:
                     upstream |= _upstream(graph, socket[0])
-    return any(name in graph.nodes and graph.nodes[name].type in VIEW_NODES
+    return any(name in graph.nodes and graph.nodes[name].type in kinds
                for name in upstream)
 
 
@@ -337,6 +351,10 @@ class MaterialTextures:
         # Materials whose node-driven inputs read the view (``VIEW_NODES``).
         self.view_inputs = np.array([t and _reads_view(m, g) for m, g, t in
                                      zip(scene.materials, self.graphs, self.textured)], bool)
+        # Materials whose node-driven inputs read Light Path (``CAMERA_FLAG``).
+        self.light_path = np.array([t and _reads_view(m, g, ("ShaderNodeLightPath",))
+                                    for m, g, t in zip(scene.materials, self.graphs,
+                                                       self.textured)], bool)
         self.any = bool(self.textured.any())
         self.mean_closures = [tuple(m.closures) for m in scene.materials]
         self.mean_reduction = {}
@@ -393,10 +411,14 @@ class MaterialTextures:
         "all", or "reflectance" / "emission" for only the node-driven inputs that the seed's
         (rho_d, rho_s) / M read (``EMISSION_PARAMS``; the others keep their means).
         ``hit_values``: the hits' view (:meth:`view_at`), for materials whose inputs read it
-        (``view_inputs``; without it, the view along the normal)."""
+        (``view_inputs``; without it, the view along the normal), and ``CAMERA_FLAG`` (N,)
+        for those that read Light Path (without it, 0: not a camera ray)."""
         graph = self.graphs[material_id]
         if hit_values is None and self.view_inputs[material_id]:
             hit_values = self.view_at(prim, bu, bv)
+        if self.light_path[material_id] and (hit_values is None
+                                             or CAMERA_FLAG not in hit_values):
+            hit_values = {**(hit_values or {}), CAMERA_FLAG: np.zeros(len(prim))}
         evaluator = nodes.Evaluator(graph, HitInputs(self.corners, prim, bu, bv, hit_values),
                                     len(prim))
         out = []
@@ -505,6 +527,11 @@ class MaterialTextures:
         bu, bv = su * (1.0 - v), su * v            # area-uniform barycentrics
         prim = tris[pick]
         closures = self.closures_at(material_id, prim, bu, bv)
+        seen = None
+        if self.light_path[material_id]:
+            # What camera rays meet: a closure mixed in for them alone gets its lobe too.
+            seen = self.closures_at(material_id, prim, bu, bv,
+                                    hit_values={CAMERA_FLAG: np.ones(len(prim))})
         means = []
         for c, original in zip(closures, material.closures):
             if not original.textures:
@@ -520,6 +547,9 @@ class MaterialTextures:
             mean = original.scaled(1.0)
             if WEIGHT in original.textures:        # the mixed weight's mean over the surface
                 mean.weight = np.mean(np.broadcast_to(c.weight, (len(prim), 3)), axis=0)
+                if seen is not None:
+                    mean.weight = np.maximum(mean.weight, np.mean(np.broadcast_to(
+                        seen[len(means)].weight, (len(prim), 3)), axis=0))
             mean.params = {k: (np.asarray(v, np.float64) if isinstance(v, tuple) else v)
                            for k, v in params.items()}
             means.append(mean)

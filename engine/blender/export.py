@@ -37,7 +37,10 @@ animation already applied by Blender) and turns it into the renderer's inert sce
   - Glossy BSDF: rho_s = Color. Metallic BSDF: rho_s = Base Color (F82 mode) or the
     normal-incidence Fresnel reflectance ((n-1)^2 + k^2) / ((n+1)^2 + k^2) per channel.
   - Mix Shader: (1 - Fac) A + Fac B; Add Shader: A + B. A Fac driven by nodes the evaluator
-    supports becomes a per-hit factor on the weights below it (``textures.WEIGHT``).
+    supports becomes a per-hit factor on the weights below it (``textures.WEIGHT``); Light
+    Path Is Camera Ray among them tells camera rays from the rest (``textures.CAMERA_FLAG``:
+    an emitter the camera sees through), its other outputs read a camera ray's values, with
+    a warning.
   - Glass / Refraction: only the reflected Fresnel part at normal incidence, as a mirror.
   - Translucent, Subsurface, Sheen, Toon, hair and other shaders with a colour: treated as a
     diffuse of that colour. Transparent and Holdout: black. Anything else: default grey.
@@ -1021,6 +1024,12 @@ def material_from_nodes(mat, warn=None, images: dict | None = None) -> Material:
              f"rendered black")
         return Material(name, diffuse=np.zeros(3))
     closures = reader.closures(src)
+    others = sorted(light_path_outputs(tree) - {"Is Camera Ray"})
+    if others:
+        warn(f"{reader.owner}: Light Path {', '.join(others)} "
+             f"{'is' if len(others) == 1 else 'are'} read as a camera ray's (0, depths 0) at "
+             "every hit; only Is Camera Ray tells rays apart (camera rays from photons, "
+             "gather rays, light samples and reflections)")
     # Driven inputs no closure parameter took (a Mix Shader's Fac ...): their defaults.
     for (node_name, _names), (_socket, value, socket_name) in reader.driven.items():
         warn(f"{reader.owner}: {socket_name} of '{node_name}' is driven by nodes; Lanterna "
