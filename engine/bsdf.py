@@ -656,9 +656,18 @@ class GlassLobe:
         return self.alpha * self.alpha < DELTA_ALPHA2
 
     def at(self, count: int, front=None, roughness=None, base=None):
-        """The lobe at ``count`` hits; ``roughness`` as ``GlossyLobe.at`` (``base``, the
-        Base Color per hit, is not read: the transmission tint keeps its mean)."""
+        """The lobe at ``count`` hits; ``roughness`` as ``GlossyLobe.at``; ``base`` (N, 3) a
+        Principled BSDF's node-driven Base Color per hit (NaN where not driven): its
+        transmission tint there, sqrt(clip(Base Color, 0, 1)) per crossing, as Cycles."""
         front = np.ones(count, bool) if front is None else np.asarray(front, bool)
+        transmission_tint = self.transmission_tint
+        if base is not None and self.metal_part == "dielectric":
+            given = ~np.isnan(base[:, 0])
+            if given.any():
+                transmission_tint = np.where(
+                    given[:, None], np.sqrt(np.clip(np.where(given[:, None], base, 0.0),
+                                                    0.0, 1.0)),
+                    np.broadcast_to(self.transmission_tint, (count, 3)))
         eta = np.where(front, float(self.ior), 1.0 / float(self.ior))
         film = None
         if self.film_thickness > 0:
@@ -667,15 +676,14 @@ class GlassLobe:
             film = (np.full(count, self.film_thickness),
                     np.where(front, self.film_ior, self.film_ior / float(self.ior)))
         if self.delta:
-            return SmoothGlass(eta, self.reflection_tint, self.transmission_tint, self.f0,
-                               film)
+            return SmoothGlass(eta, self.reflection_tint, transmission_tint, self.f0, film)
         alpha = np.full(count, float(self.alpha))
         if roughness is not None and self.roughness_map is not None:
             given = ~np.isnan(roughness)
             r = np.clip(np.where(given, roughness, 0.0), 0.0, 1.0)
             alpha = np.where(given, np.maximum(r * r, MIN_TEXTURED_ALPHA), alpha)
         return MicrofacetGlass(alpha, eta, self.reflection_tint,
-                               self.transmission_tint, self.f0, multiscatter=self.multiscatter,
+                               transmission_tint, self.f0, multiscatter=self.multiscatter,
                                film=film)
 
 
@@ -903,7 +911,7 @@ def _principled_lobes(c, lobes):
         plain = np.all(p["specular_tint"] == 1.0)
         glass_f0 = float(fresnel_model.f0_from_ior(ior)) * np.maximum(p["specular_tint"], 0)
         lobes.append(GlassLobe(weight * transmission, float(p["roughness"]) ** 2, ior,
-                               np.ones(3), np.sqrt(np.clip(p["base_color"], 0, None)),
+                               np.ones(3), np.sqrt(np.clip(p["base_color"], 0, 1)),
                                None if plain else np.broadcast_to(glass_f0, (3,)).copy(),
                                multiscatter, depth=depth, metal_part="dielectric",
                                metallic_mean=metallic, film_thickness=film,

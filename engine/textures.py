@@ -47,9 +47,11 @@ What follows the texture at each hit, and what takes its mean
     The diffuse reflectance (camera shading, the photons' stored power and roulette, gather
     rays, the cache's records: all read ``bsdf.SurfaceParams.diffuse`` at their own hit), the
     specular share of the roulette, the exitance seen by rays and the Mix Shader weights of
-    every lobe follow the texture exactly. The glossy and glass lobes' own parameters (their
-    roughness, Fresnel, tints) use the mean of their node-driven inputs, and emissive meshes are sampled as lights by their mean exitance;
-    export names every such input in a warning (:func:`approximations`).
+    every lobe follow the texture exactly, and so do the lobes' Roughness, a Principled BSDF's
+    Metallic and its Base Color (the metal's f0 and the transmission's tint:
+    ``bsdf.LobeInputs``). The lobes' other parameters (anisotropy, a coat's or sheen's,
+    the Transmission Weight) use the mean of their node-driven inputs; export names every
+    such input in a warning (:func:`approximations`).
 
 Light Path in a material: Is Camera Ray tells camera rays (the camera path's hits, also those
 gone straight on through transparent surfaces, as Cycles keeps the flag) from all others
@@ -312,12 +314,6 @@ def approximations(closures) -> list[str]:
             out.append(f"{param.replace('_', ' ').title()} of '{c.node}' is driven by nodes; "
                        "its glossy and glass lobes use its mean over the surface (per-hit "
                        "values reach the diffuse, the emission and the roulette only)")
-        if c.kind == "principled" and "base_color" in c.textures and (
-                np.any(np.asarray(c.params["transmission"]) > 0)
-                or "transmission" in c.textures):
-            out.append(f"Base Color of '{c.node}' is driven by nodes; its transmission lobe "
-                       "uses its mean over the surface (the diffuse and the metal follow the "
-                       "texture per hit)")
         if c.kind == "principled" and "transmission" in c.textures:
             out.append(f"Transmission Weight of '{c.node}' is driven by nodes; its glass and "
                        "specular lobes use its mean over the surface (the diffuse follows it "
