@@ -138,9 +138,13 @@ class MaterialTable:
         self.lobe_roughness = np.full((len(self.diffuse), self.closure_count), np.nan)
         self.lobe_metallic = np.full((len(self.diffuse), self.closure_count), np.nan)
         self.lobe_base = np.full((len(self.diffuse), self.closure_count, 3), np.nan)
-        # The mean Metallic each material's specular layer was made with (0 without one).
+        self.lobe_transmission = np.full((len(self.diffuse), self.closure_count), np.nan)
+        # The mean Metallic and Transmission Weight each material's specular layer was made
+        # with (0 without one).
         self.layer_metallic = np.array([g.layer.metallic_mean if g is not None and
                                         g.layer is not None else 0.0 for g in self.glossy])
+        self.layer_transmission = np.array([g.layer.transmission_mean if g is not None and
+                                            g.layer is not None else 0.0 for g in self.glossy])
         self.layer_closure = np.array([g.layer.closure if g is not None and g.layer is not None
                                        else -1 for g in self.glossy], np.int64)
         # Materials with a glass lobe (light passes through them).
@@ -283,7 +287,7 @@ class MaterialTable:
 # emitter no emission texture).
 REFLECTANCE_SLOTS = ("diffuse", "specular", "diffuse_over_pi", "transport_diffuse",
                      "transport_specular", "translucent", "lobe_ratio", "lobe_roughness",
-                     "lobe_metallic", "lobe_base")
+                     "lobe_metallic", "lobe_base", "lobe_transmission")
 EMISSION_SLOTS = ("exitance", "emitted_radiance")
 TEXTURED_SLOTS = REFLECTANCE_SLOTS + EMISSION_SLOTS
 
@@ -353,18 +357,20 @@ class SurfaceParams:
         roughness = np.full((len(material), table.closure_count), np.nan)
         metallic = np.full((len(material), table.closure_count), np.nan)
         base = np.full((len(material), table.closure_count, 3), np.nan)
+        transmission = np.full((len(material), table.closure_count), np.nan)
         prim, bu, bv = self.hits
         for material_id, at in self._textured_hits(table.textured_reflectance):
-            diffuse[at], specular[at], translucent[at], (weights, rough, metal, colour) = \
+            diffuse[at], specular[at], translucent[at], (weights, rough, metal, colour, tw) = \
                 table.textures.reflectance(material_id, prim[at], bu[at], bv[at],
                                            with_translucent=True, with_ratios=True,
                                            hit_values=self._view(material_id, at))
             c = weights.shape[1]
             ratio[at, :c], roughness[at, :c] = weights, rough
-            metallic[at, :c], base[at, :c] = metal, colour
+            metallic[at, :c], base[at, :c], transmission[at, :c] = metal, colour, tw
         cache = self._cache
         cache["lobe_ratio"], cache["lobe_roughness"] = ratio, roughness
         cache["lobe_metallic"], cache["lobe_base"] = metallic, base
+        cache["lobe_transmission"] = transmission
         cache["diffuse"], cache["specular"] = diffuse, specular
         cache["translucent"] = translucent
         cache["diffuse_over_pi"] = diffuse / np.pi
@@ -378,6 +384,9 @@ class SurfaceParams:
             layer[mixed] *= metal_factor("dielectric", metallic[mixed, closure[mixed]],
                                          np.take(table.layer_metallic,
                                                  material[mixed]))[:, None]
+            layer[mixed] *= transmission_factor("below", transmission[mixed, closure[mixed]],
+                                                np.take(table.layer_transmission,
+                                                        material[mixed]))[:, None]
         cache["transport_specular"] = specular + layer
 
     def _emission_slots(self) -> None:
@@ -416,7 +425,8 @@ class SurfaceParams:
                 or not self.table.lobe_textured[self.material].any():
             return None
         return LobeInputs(self._take("lobe_ratio"), self._take("lobe_roughness"),
-                          self._take("lobe_metallic"), self._take("lobe_base"))
+                          self._take("lobe_metallic"), self._take("lobe_base"),
+                          self._take("lobe_transmission"))
 
 
     def replace_diffuse(self, index, diffuse) -> None:
@@ -457,16 +467,19 @@ class LobeInputs:
     (N, C) each closure's node-driven Roughness at the hit (NaN: the lobe's own),
     ``metallic`` (N, C) and ``base`` (N, C, 3) a Principled BSDF's node-driven Metallic and
     Base Color (NaN: its mean): its metal lobe's weight and colour, its dielectric lobes'
-    weight (``GlossyLobe.metal_part``)."""
+    weight (``GlossyLobe.metal_part``), the glass lobe's tint; ``transmission`` (N, C) its
+    node-driven Transmission Weight (NaN: its mean): the glass lobe's weight and the
+    specular layer's below it (``transmission_part``)."""
 
     ratio: np.ndarray
     roughness: np.ndarray
     metallic: np.ndarray
     base: np.ndarray
+    transmission: np.ndarray
 
     def __getitem__(self, index) -> "LobeInputs":
         return LobeInputs(self.ratio[index], self.roughness[index], self.metallic[index],
-                          self.base[index])
+                          self.base[index], self.transmission[index])
 
 
 # -- Lobes ----------------------------------------------------------------------------------------
@@ -593,6 +606,10 @@ class GlossyLobe:
     metal_part: str | None = None
     metallic_mean: float = 0.0
     base_mean: np.ndarray | None = None
+    # Below a Principled BSDF's transmission: "below" (weight x (1 - Transmission Weight)),
+    # made at ``transmission_mean``; None elsewhere.
+    transmission_part: str | None = None
+    transmission_mean: float = 0.0
     transmits = False
 
     @property
@@ -649,6 +666,10 @@ class GlassLobe:
     metallic_mean: float = 0.0
     film_thickness: float = 0.0             # Thin Film Thickness [nm]; 0: no film
     film_ior: float = 1.33                  # Thin Film IOR
+    # A Principled BSDF's transmission: "glass" (weight x Transmission Weight), made at
+    # ``transmission_mean``; None elsewhere.
+    transmission_part: str | None = None
+    transmission_mean: float = 0.0
     transmits = True
 
     @property
@@ -699,6 +720,7 @@ class SheenLobe:
     closure: int = -1
     roughness_map = None              # its own Roughness, not per hit
     metal_part = None
+    transmission_part = None
     transmits = False
     sharp = False
     delta = False
@@ -780,6 +802,10 @@ class GlossyMaterial:
                 out[j] = out[j] * metal_factor(lobe.metal_part,
                                                per_hit.metallic[:, lobe.closure],
                                                lobe.metallic_mean)[:, None]
+            if lobe.transmission_part is not None and lobe.closure >= 0:
+                out[j] = out[j] * transmission_factor(lobe.transmission_part,
+                                                      per_hit.transmission[:, lobe.closure],
+                                                      lobe.transmission_mean)[:, None]
         return out
 
     def diffuse_factor(self, wo, n) -> np.ndarray:
@@ -915,7 +941,8 @@ def _principled_lobes(c, lobes):
                                None if plain else np.broadcast_to(glass_f0, (3,)).copy(),
                                multiscatter, depth=depth, metal_part="dielectric",
                                metallic_mean=metallic, film_thickness=film,
-                               film_ior=film_ior))
+                               film_ior=film_ior, transmission_part="glass",
+                               transmission_mean=transmission))
     weight = weight * (1 - transmission)
     if (eta == 1.0 and not film) or not np.any(weight > 0):
         return None, tops
@@ -928,7 +955,8 @@ def _principled_lobes(c, lobes):
         make = (lambda n, eta=eta, tinted=tinted: fresnel_model.TintedDielectricFresnel(
             np.full(n, eta), np.broadcast_to(tinted, (n, 3))))
     layer = GlossyLobe(weight, ax, ay, make, multiscatter, depth=depth,
-                       metal_part="dielectric", metallic_mean=metallic)
+                       metal_part="dielectric", metallic_mean=metallic,
+                       transmission_part="below", transmission_mean=transmission)
     lobes.append(layer)
     return layer, tops
 
@@ -1107,6 +1135,16 @@ def metal_factor(part: str, metallic, mean) -> np.ndarray:
     if part == "metal":
         return m / np.maximum(mean, 1e-12)
     return (1.0 - m) / np.maximum(1.0 - mean, 1e-12)
+
+
+def transmission_factor(part: str, transmission, mean) -> np.ndarray:
+    """(N,) what a Principled lobe made at Transmission Weight ``mean`` is scaled by at hits
+    of ``transmission`` (N,) (NaN: the mean): t / mean for the "glass" part, (1 - t) /
+    (1 - mean) for the specular layer "below" it (``GlossyLobe.transmission_part``)."""
+    t = np.where(np.isnan(transmission), mean, transmission)
+    if part == "glass":
+        return t / np.maximum(mean, 1e-12)
+    return (1.0 - t) / np.maximum(1.0 - mean, 1e-12)
 
 
 def _roughness_of(lobe, per_hit: LobeInputs):

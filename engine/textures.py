@@ -48,10 +48,10 @@ What follows the texture at each hit, and what takes its mean
     rays, the cache's records: all read ``bsdf.SurfaceParams.diffuse`` at their own hit), the
     specular share of the roulette, the exitance seen by rays and the Mix Shader weights of
     every lobe follow the texture exactly, and so do the lobes' Roughness, a Principled BSDF's
-    Metallic and its Base Color (the metal's f0 and the transmission's tint:
-    ``bsdf.LobeInputs``). The lobes' other parameters (anisotropy, a coat's or sheen's,
-    the Transmission Weight) use the mean of their node-driven inputs; export names every
-    such input in a warning (:func:`approximations`).
+    Metallic, its Base Color (the metal's f0 and the transmission's tint) and its
+    Transmission Weight (``bsdf.LobeInputs``). The lobes' other parameters (anisotropy, a
+    coat's or sheen's) use the mean of their node-driven inputs; export names every such
+    input in a warning (:func:`approximations`).
 
 Light Path in a material: Is Camera Ray tells camera rays (the camera path's hits, also those
 gone straight on through transparent surfaces, as Cycles keeps the flag) from all others
@@ -309,15 +309,11 @@ def approximations(closures) -> list[str]:
                 continue
             if param == "roughness" and c.kind in LOBE_ROUGHNESS:
                 continue                      # per hit (``bsdf.LobeInputs``)
-            if c.kind == "principled" and param == "base_color":
+            if c.kind == "principled" and param in ("base_color", "transmission"):
                 continue
             out.append(f"{param.replace('_', ' ').title()} of '{c.node}' is driven by nodes; "
                        "its glossy and glass lobes use its mean over the surface (per-hit "
                        "values reach the diffuse, the emission and the roulette only)")
-        if c.kind == "principled" and "transmission" in c.textures:
-            out.append(f"Transmission Weight of '{c.node}' is driven by nodes; its glass and "
-                       "specular lobes use its mean over the surface (the diffuse follows it "
-                       "per hit)")
     return out
 
 
@@ -339,10 +335,12 @@ class MaterialTextures:
         self.lobe_roughness = np.array([t and any("roughness" in c.textures and c.kind in
                                                   LOBE_ROUGHNESS for c in m.closures)
                                         for m, t in zip(scene.materials, self.textured)], bool)
-        # Materials with a Principled BSDF whose Metallic or Base Color is node-driven: its
-        # metal lobe's weight and colour, and its dielectric lobes' weight, per hit.
+        # Materials with a Principled BSDF whose Metallic, Base Color or Transmission Weight
+        # is node-driven: its metal lobe's weight and colour, its glass lobe's weight and
+        # tint, and its dielectric lobes' weight, per hit.
         self.lobe_metal = np.array([t and any(c.kind == "principled" and (
-            "metallic" in c.textures or "base_color" in c.textures) for c in m.closures)
+            "metallic" in c.textures or "base_color" in c.textures
+            or "transmission" in c.textures) for c in m.closures)
             for m, t in zip(scene.materials, self.textured)], bool)
         # Materials whose node-driven inputs read the view (``VIEW_NODES``).
         self.view_inputs = np.array([t and _reads_view(m, g) for m, g, t in
@@ -448,8 +446,9 @@ class MaterialTextures:
         ``with_ratios``: also (k, C) each closure's weight at the hit over its weight in
         ``mean_closures`` (1 for closures without a node-driven weight; 0 where the mean is
         0), by which its glossy and glass lobes are scaled per hit, (k, C) the Roughness of
-        closures whose lobes take it per hit, (k, C) a Principled BSDF's Metallic and (k, C,
-        3) its Base Color where nodes drive them (NaN elsewhere). ``hit_values``: see
+        closures whose lobes take it per hit, (k, C) a Principled BSDF's Metallic, (k, C, 3)
+        its Base Color and (k, C) its Transmission Weight where nodes drive them (NaN
+        elsewhere). ``hit_values``: see
         :meth:`closures_at`."""
         n = len(prim)
         closures = self.closures_at(material_id, prim, bu, bv, "reflectance", hit_values)
@@ -467,6 +466,7 @@ class MaterialTextures:
             roughness = np.full((n, len(closures)), np.nan)
             metallic = np.full((n, len(closures)), np.nan)
             base = np.full((n, len(closures), 3), np.nan)
+            transmission = np.full((n, len(closures)), np.nan)
             originals = self.scene.materials[material_id].closures
             for j, (c, mean) in enumerate(zip(closures, self.mean_closures[material_id])):
                 if WEIGHT in originals[j].textures:
@@ -479,7 +479,10 @@ class MaterialTextures:
                     metallic[:, j] = np.broadcast_to(c.params["metallic"], (n,))
                 if c.kind == "principled" and "base_color" in originals[j].textures:
                     base[:, j] = np.broadcast_to(c.params["base_color"], (n, 3))
-            out += ((ratios, roughness, metallic, base),)
+                if c.kind == "principled" and "transmission" in originals[j].textures:
+                    transmission[:, j] = np.clip(np.broadcast_to(c.params["transmission"],
+                                                                 (n,)), 0.0, 1.0)
+            out += ((ratios, roughness, metallic, base, transmission),)
         return out
 
     def exitance(self, material_id: int, prim, bu, bv, hit_values: dict | None = None):
