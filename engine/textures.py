@@ -408,8 +408,9 @@ class MaterialTextures:
         (``view_inputs``; without it, the view along the normal), and ``CAMERA_FLAG`` (N,)
         for those that read Light Path (without it, 0: not a camera ray)."""
         graph = self.graphs[material_id]
-        if hit_values is None and self.view_inputs[material_id]:
-            hit_values = self.view_at(prim, bu, bv)
+        if self.view_inputs[material_id] and (hit_values is None
+                                              or "incoming" not in hit_values):
+            hit_values = {**self.view_at(prim, bu, bv), **(hit_values or {})}
         if self.light_path[material_id] and (hit_values is None
                                              or CAMERA_FLAG not in hit_values):
             hit_values = {**(hit_values or {}), CAMERA_FLAG: np.zeros(len(prim))}

@@ -138,3 +138,32 @@ def test_other_light_path_outputs_are_named():
     lit = surfaces.params(prim, half, half).diffuse
     np.testing.assert_allclose(seen, np.tile([0.8, 0.1, 0.1], (len(prim), 1)), atol=1e-6)
     np.testing.assert_allclose(lit, np.tile([0.1, 0.7, 0.1], (len(prim), 1)), atol=1e-6)
+
+
+def test_light_path_with_view_nodes_in_one_material():
+    """A Fac that reads Light Path and Fresnel together: the surface means (made for camera
+    rays too) hand the Fresnel its view along the normal, and camera hits and other hits
+    mix differently (before: the camera means asked for a view they were not given)."""
+    from lanterna.engine.blender.export import export_scene
+    from lanterna.engine.surfaces import SceneSurfaces
+
+    _scene("two_faced_wall")
+    tree = bpy.data.materials["Two-faced"].node_tree
+    path = next(n for n in tree.nodes if n.type == "LIGHT_PATH")
+    mix = next(n for n in tree.nodes if n.type == "MIX")
+    fresnel = tree.nodes.new("ShaderNodeFresnel")
+    times = tree.nodes.new("ShaderNodeMath")
+    times.operation = "MULTIPLY"
+    tree.links.new(path.outputs["Is Camera Ray"], times.inputs[0])
+    tree.links.new(fresnel.outputs["Fac"], times.inputs[1])
+    tree.links.new(times.outputs["Value"], mix.inputs["Factor"])
+    exported = export_scene(bpy.context.evaluated_depsgraph_get())
+    surfaces = SceneSurfaces(exported)
+    wall = next(i for i, m in enumerate(exported.materials) if m.name == "Two-faced")
+    prim = np.flatnonzero(exported.material_ids == wall)[:2]
+    half = np.full(len(prim), 0.3)
+    down = np.tile([0.0, 1.0, 0.0], (len(prim), 1))          # head-on into the wall
+    seen = surfaces.params(prim, half, half, down, camera=True).diffuse
+    lit = surfaces.params(prim, half, half, down).diffuse
+    np.testing.assert_allclose(lit, np.tile([0.1, 0.7, 0.1], (len(prim), 1)), atol=1e-6)
+    assert np.all(seen[:, 0] > lit[:, 0]) and np.all(seen[:, 1] < lit[:, 1])
