@@ -2,11 +2,40 @@
 grey world, a camera and an area light, Cycles' image of the scene as an (H, W, 3) float64
 array (row 0 at the top, as Lanterna's images), read back from an EXR written under
 ``tmp_path``, Lanterna's image at ``final``'s settings, and 4 x 4 region means."""
+import math
 import pathlib
 
 import numpy as np
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
+
+
+def empty_scene(bpy, resolution=(64, 48), bounces: int = 64):
+    """Blender's empty factory scene at ``resolution`` [px], Cycles' bounce limits all at
+    ``bounces`` (the references' all-bounce settings), a black world; returns the scene."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.resolution_x, scene.render.resolution_y = resolution
+    scene.render.resolution_percentage = 100
+    c = scene.cycles
+    c.max_bounces = c.diffuse_bounces = c.glossy_bounces = bounces
+    c.transmission_bounces = c.transparent_max_bounces = bounces
+    black_world(bpy, scene)
+    return scene
+
+
+def emissive_wall(bpy, location, size=(12.0, 8.0), strength: float = 1.0):
+    """An upright white Emission quad of ``size`` (width, height) [m] centred at ``location``,
+    facing -y, of ``strength``; returns the object."""
+    bpy.ops.mesh.primitive_plane_add(size=1, location=location, rotation=(math.pi / 2, 0, 0))
+    wall = bpy.context.object
+    wall.scale = (size[0], size[1], 1)
+    mat, tree, out = node_material(bpy, "Wall")
+    emission = tree.nodes.new("ShaderNodeEmission")
+    emission.inputs["Strength"].default_value = strength
+    tree.links.new(emission.outputs[0], out.inputs["Surface"])
+    wall.data.materials.append(mat)
+    return wall
 
 
 def black_world(bpy, scene) -> None:

@@ -34,7 +34,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from inline_cycles import (add_camera, black_world, cycles_image,  # noqa: E402
+from inline_cycles import (add_camera, cycles_image, emissive_wall, empty_scene,  # noqa: E402
                            lanterna_image, node_material)
 
 CYCLES_SAMPLES = 1024
@@ -70,15 +70,8 @@ def _glass_material(kind: str):
 
 
 def _scene(kind: str):
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
-    scene.render.resolution_x, scene.render.resolution_y = 64, 48
-    scene.render.resolution_percentage = 100
-    c = scene.cycles
-    c.max_bounces = c.diffuse_bounces = c.glossy_bounces = 64
-    c.transmission_bounces = c.transparent_max_bounces = 64
-    c.blur_glossy = 0.0
-    black_world(bpy, scene)
+    scene = empty_scene(bpy)
+    scene.cycles.blur_glossy = 0.0
     add_camera(bpy, scene, (0.0, -2.0, 1.2), (math.radians(60), 0.0, 0.0))
     if kind.startswith("box"):
         bpy.ops.mesh.primitive_cube_add(size=2, location=(0, 0, -1))
@@ -86,15 +79,7 @@ def _scene(kind: str):
     else:
         bpy.ops.mesh.primitive_plane_add(size=8, location=(0, 0, 0))
     bpy.context.object.data.materials.append(_glass_material(kind))
-    bpy.ops.mesh.primitive_plane_add(size=1, location=(0, 3.6, 3.0),
-                                     rotation=(math.radians(90), 0, 0))
-    wall = bpy.context.object
-    wall.scale = (12, 8, 1)
-    mat, tree, out = node_material(bpy, "Wall")
-    emission = tree.nodes.new("ShaderNodeEmission")
-    emission.inputs["Strength"].default_value = 1.0
-    tree.links.new(emission.outputs[0], out.inputs["Surface"])
-    wall.data.materials.append(mat)
+    emissive_wall(bpy, (0, 3.6, 3.0))
     return scene
 
 

@@ -23,7 +23,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from inline_cycles import (add_area_light, add_camera, black_world, cycles_image,  # noqa: E402
+from inline_cycles import (add_area_light, add_camera, cycles_image, empty_scene,  # noqa: E402
                            lanterna_image, node_material, regions)
 
 CASES = ("hidden_panel", "two_faced_wall")
@@ -69,14 +69,7 @@ def _two_faced_material():
 
 
 def _scene(kind: str):
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
-    scene.render.resolution_x, scene.render.resolution_y = 64, 48
-    scene.render.resolution_percentage = 100
-    c = scene.cycles
-    c.max_bounces = c.diffuse_bounces = c.glossy_bounces = 64
-    c.transmission_bounces = c.transparent_max_bounces = 64
-    black_world(bpy, scene)
+    scene = empty_scene(bpy)
     add_camera(bpy, scene, (0.0, -4.0, 2.5), (math.radians(62), 0.0, 0.0))
     grey = _diffuse("Grey", (0.8, 0.8, 0.8))
     bpy.ops.mesh.primitive_plane_add(size=8, location=(0, 0, 0))

@@ -23,7 +23,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from inline_cycles import (add_camera, black_world, cycles_image,  # noqa: E402
+from inline_cycles import (add_camera, cycles_image, emissive_wall, empty_scene,  # noqa: E402
                            lanterna_image, node_material, regions)
 
 CASES = ("tint", "weight")
@@ -33,14 +33,7 @@ BOUND = 0.015
 
 
 def _scene(kind: str = "tint"):
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
-    scene.render.resolution_x, scene.render.resolution_y = 64, 48
-    scene.render.resolution_percentage = 100
-    c = scene.cycles
-    c.max_bounces = c.diffuse_bounces = c.glossy_bounces = 64
-    c.transmission_bounces = c.transparent_max_bounces = 64
-    black_world(bpy, scene)
+    scene = empty_scene(bpy)
     add_camera(bpy, scene, (0.0, -2.0, 1.2), (math.radians(90), 0.0, 0.0))
     bpy.ops.mesh.primitive_plane_add(size=6, location=(0, 1.0, 1.2),
                                      rotation=(math.radians(90), 0, 0))
@@ -62,15 +55,7 @@ def _scene(kind: str = "tint"):
         tree.links.new(checker.outputs["Fac"], glass.inputs["Transmission Weight"])
     tree.links.new(glass.outputs[0], out.inputs["Surface"])
     bpy.context.object.data.materials.append(mat)
-    bpy.ops.mesh.primitive_plane_add(size=1, location=(0, 3.6, 1.2),
-                                     rotation=(math.radians(90), 0, 0))
-    wall = bpy.context.object
-    wall.scale = (12, 8, 1)
-    wall_mat, wall_tree, wall_out = node_material(bpy, "Wall")
-    emission = wall_tree.nodes.new("ShaderNodeEmission")
-    emission.inputs["Strength"].default_value = 1.0
-    wall_tree.links.new(emission.outputs[0], wall_out.inputs["Surface"])
-    wall.data.materials.append(wall_mat)
+    emissive_wall(bpy, (0, 3.6, 1.2))
     return scene
 
 
