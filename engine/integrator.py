@@ -41,7 +41,12 @@ What it computes
           glass sampled, a Principled layer as a specular share over a diffuse reduced by it;
         * glass (``bsdf.GlassLobe``: Glass, Refraction, Principled Transmission) is a lobe
           like the glossy ones that always goes on: eta = IOR entering a front face, 1 / IOR
-          leaving by a back face, all its light from its own rays;
+          leaving by a back face, all its light from its own rays; at the path's first
+          ``GLASS_SPLIT_DEPTH`` vertices smooth glass sends one ray each way (weights F and
+          1 - F, ``lobes.SmoothGlass.branches``), deeper ones pick one by its Fresnel share;
+        * materials whose nodes read Light Path Is Camera Ray see 1 at the camera path's
+          hits (also after transparent surfaces), 0 everywhere else (``SurfaceParams(camera=
+          ...)``);
         * caustics: at diffuse hits (``full`` mode) the caustic map's irradiance
           (``indirect.CausticEstimate``, ``context.caustics``) x rho_d / pi, in Indirect;
         * after a bounce, area lights and point and spot lights with a radius that the ray
@@ -1003,6 +1008,8 @@ class _GlossyHits:
         self.wo, self.n = wo, n
         self.materials = materials
         self.material_ids = surface.material[self.index]
+        # After ``sample(split_glass=True)``: the positions in ``index`` of the twin rays.
+        self.twin_of = np.zeros(0, np.int64)
         # The lobes' per-hit inputs (``bsdf.LobeInputs``), or None
         self.per_hit = surface.lobe_inputs
         # (hits (k,) into the vertex, [(weight (k, 3), lobe, delta)], lobe shares (k, J))
