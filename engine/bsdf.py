@@ -130,7 +130,7 @@ class MaterialTable:
         self.has_lobe_weights = bool(self.lobe_weighted.any())
         # ... and those whose lobes' Roughness is node-driven (``LobeInputs.roughness``).
         self.lobe_textured = (self.lobe_weighted
-                              | ((self.textures.lobe_roughness | self.textures.lobe_metal)
+                              | ((self.textures.lobe_roughness | self.textures.lobe_principled)
                                  & self.camera_glossy))
         self.has_lobe_inputs = bool(self.lobe_textured.any())
         self.closure_count = max([len(m.closures) for m in scene.materials] + [1])
@@ -648,9 +648,9 @@ class GlassLobe:
     ray arriving from outside) refracts with eta = ior, one on the back face with 1 / ior.
     ``reflection_tint`` / ``transmission_tint`` (3,) colour the two branches; ``f0`` (3,) is
     the Principled remap of the Fresnel (None: the exact dielectric); ``film_thickness`` [nm]
-    and ``film_ior`` a thin film over it (Cycles' interference: ``lobes._glass_fresnel``). Light samples reach only
-    its reflection side (a light behind glass is not reachable by a shadow ray, in Cycles
-    too); what it transmits of a light comes through its own rays."""
+    and ``film_ior`` a thin film over it (Cycles' interference: ``lobes._glass_fresnel``).
+    Light samples reach only its reflection side (a light behind glass is not reachable by a
+    shadow ray, in Cycles too); what it transmits of a light comes through its own rays."""
 
     weight: np.ndarray
     alpha: float

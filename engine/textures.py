@@ -255,7 +255,7 @@ def _upstream(graph, node: str) -> set:
     return seen
 
 
-def _reads_view(material, graph, kinds=VIEW_NODES) -> bool:
+def _reads_nodes(material, graph, kinds=VIEW_NODES) -> bool:
     """Whether any node-driven input of ``material`` reads a node of ``kinds`` (by default
     the ``VIEW_NODES``)."""
     if graph is None:
@@ -338,15 +338,15 @@ class MaterialTextures:
         # Materials with a Principled BSDF whose Metallic, Base Color or Transmission Weight
         # is node-driven: its metal lobe's weight and colour, its glass lobe's weight and
         # tint, and its dielectric lobes' weight, per hit.
-        self.lobe_metal = np.array([t and any(c.kind == "principled" and (
+        self.lobe_principled = np.array([t and any(c.kind == "principled" and (
             "metallic" in c.textures or "base_color" in c.textures
             or "transmission" in c.textures) for c in m.closures)
             for m, t in zip(scene.materials, self.textured)], bool)
         # Materials whose node-driven inputs read the view (``VIEW_NODES``).
-        self.view_inputs = np.array([t and _reads_view(m, g) for m, g, t in
+        self.view_inputs = np.array([t and _reads_nodes(m, g) for m, g, t in
                                      zip(scene.materials, self.graphs, self.textured)], bool)
         # Materials whose node-driven inputs read Light Path (``CAMERA_FLAG``).
-        self.light_path = np.array([t and _reads_view(m, g, ("ShaderNodeLightPath",))
+        self.light_path = np.array([t and _reads_nodes(m, g, ("ShaderNodeLightPath",))
                                     for m, g, t in zip(scene.materials, self.graphs,
                                                        self.textured)], bool)
         self.any = bool(self.textured.any())
