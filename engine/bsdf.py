@@ -685,10 +685,9 @@ class GlassLobe:
         if base is not None and self.metal_part == "dielectric":
             given = ~np.isnan(base[:, 0])
             if given.any():
-                transmission_tint = np.where(
-                    given[:, None], np.sqrt(np.clip(np.where(given[:, None], base, 0.0),
-                                                    0.0, 1.0)),
-                    np.broadcast_to(self.transmission_tint, (count, 3)))
+                transmission_tint = np.where(given[:, None],
+                                             np.sqrt(np.clip(np.nan_to_num(base), 0.0, 1.0)),
+                                             self.transmission_tint)
         eta = np.where(front, float(self.ior), 1.0 / float(self.ior))
         film = None
         if self.film_thickness > 0:
@@ -929,11 +928,10 @@ def _principled_lobes(c, lobes):
     tinted = f0 * np.maximum(p["specular_tint"], 0)
     transmission = float(np.clip(p["transmission"], 0, 1))
     if transmission > 0 and np.any(weight > 0):
-        # Cycles' Principled glass: the remapped index, the tinted f0 (only where it differs
-        # from the exact dielectric), the reflection untinted and sqrt(Base Color) on each
-        # crossing of the surface (twice for light through a solid object).
-        # Cycles' transmission reads IOR itself: Specular IOR Level remaps the dielectric
-        # layer only (``svm/closure.h``); Specular Tint tints its f0.
+        # Cycles' Principled glass (``svm/closure.h``): IOR itself (Specular IOR Level remaps
+        # the dielectric layer only), f0 = F0(IOR) x Specular Tint (kept only where it
+        # differs from the exact dielectric), the reflection untinted and sqrt(Base Color)
+        # on each crossing of the surface (twice for light through a solid object).
         plain = np.all(p["specular_tint"] == 1.0)
         glass_f0 = float(fresnel_model.f0_from_ior(ior)) * np.maximum(p["specular_tint"], 0)
         lobes.append(GlassLobe(weight * transmission, float(p["roughness"]) ** 2, ior,
@@ -1127,24 +1125,26 @@ def reflection_albedo(table: MaterialTable, material_ids, wo, n, per_hit=None) -
     return out
 
 
+def _share_factor(value, mean, complement: bool) -> np.ndarray:
+    """(N,) what a lobe made at a Principled share's ``mean`` is scaled by at hits of
+    ``value`` (N,) (NaN: the mean): value / mean, or with ``complement`` (1 - value) /
+    (1 - mean)."""
+    v = np.where(np.isnan(value), mean, value)
+    if complement:
+        return (1.0 - v) / np.maximum(1.0 - mean, 1e-12)
+    return v / np.maximum(mean, 1e-12)
+
+
 def metal_factor(part: str, metallic, mean) -> np.ndarray:
-    """(N,) what a Principled lobe made at Metallic ``mean`` is scaled by at hits of Metallic
-    ``metallic`` (N,) (NaN: the mean): Metallic / mean for the "metal" part, (1 - Metallic) /
+    """``_share_factor`` of Metallic: Metallic / mean for the "metal" part, (1 - Metallic) /
     (1 - mean) for a "dielectric" one (``GlossyLobe.metal_part``)."""
-    m = np.where(np.isnan(metallic), mean, metallic)
-    if part == "metal":
-        return m / np.maximum(mean, 1e-12)
-    return (1.0 - m) / np.maximum(1.0 - mean, 1e-12)
+    return _share_factor(metallic, mean, part != "metal")
 
 
 def transmission_factor(part: str, transmission, mean) -> np.ndarray:
-    """(N,) what a Principled lobe made at Transmission Weight ``mean`` is scaled by at hits
-    of ``transmission`` (N,) (NaN: the mean): t / mean for the "glass" part, (1 - t) /
+    """``_share_factor`` of Transmission Weight: t / mean for the "glass" part, (1 - t) /
     (1 - mean) for the specular layer "below" it (``GlossyLobe.transmission_part``)."""
-    t = np.where(np.isnan(transmission), mean, transmission)
-    if part == "glass":
-        return t / np.maximum(mean, 1e-12)
-    return (1.0 - t) / np.maximum(1.0 - mean, 1e-12)
+    return _share_factor(transmission, mean, part != "glass")
 
 
 def _roughness_of(lobe, per_hit: LobeInputs):

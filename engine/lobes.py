@@ -309,6 +309,11 @@ def _glass_fresnel(eta, f0, film=None):
             else fresnel_module.TintedDielectricFresnel(eta, f0))
 
 
+def _film_per_hit(film, count):
+    """A film (thickness, index) as two (count,) arrays, or None."""
+    return None if film is None else (_per_hit(film[0], count), _per_hit(film[1], count))
+
+
 def _film_subset(film, index):
     return None if film is None else (film[0][index], film[1][index])
 
@@ -332,7 +337,7 @@ class MicrofacetGlass:
         self.reflection_tint = fresnel_module.rgb_per_hit(reflection_tint, count)
         self.transmission_tint = fresnel_module.rgb_per_hit(transmission_tint, count)
         self.f0 = None if f0 is None else fresnel_module.rgb_per_hit(f0, count)
-        self.film = None if film is None else (_per_hit(film[0], count), _per_hit(film[1], count))
+        self.film = _film_per_hit(film, count)
         self.fresnel = _glass_fresnel(self.eta, self.f0, self.film)
         self.multiscatter = _per_hit(multiscatter, count, bool)
 
@@ -464,7 +469,7 @@ class SmoothGlass:
         self.reflection_tint = fresnel_module.rgb_per_hit(reflection_tint, count)
         self.transmission_tint = fresnel_module.rgb_per_hit(transmission_tint, count)
         self.f0 = None if f0 is None else fresnel_module.rgb_per_hit(f0, count)
-        self.film = None if film is None else (_per_hit(film[0], count), _per_hit(film[1], count))
+        self.film = _film_per_hit(film, count)
         self.fresnel = _glass_fresnel(self.eta, self.f0, self.film)
 
     def subset(self, index):
@@ -479,15 +484,18 @@ class SmoothGlass:
     def pdf(self, wo, wi, n):
         return np.zeros(len(wi))
 
-    def sample(self, wo, n, u):
+    def _outcomes(self, wo, n):
+        """(cos (N,), F (N, 3), reflected (N, 3), refracted (N, 3)) at views ``wo``."""
         c = np.clip(_dot(wo, n), 0.0, 1.0)
         _, cos_t = fresnel_module.dielectric(c, self.eta)
-        F = self.fresnel.reflectance(c)
+        return (c, self.fresnel.reflectance(c), 2.0 * c[:, None] * n - wo,
+                -wo / self.eta[:, None] + (c / self.eta - cos_t)[:, None] * n)
+
+    def sample(self, wo, n, u):
+        c, F, reflected, refracted = self._outcomes(wo, n)
         P = _reflect_probability(F, self.reflection_tint, self.transmission_tint)
         refract = u[:, -1] >= P
-        wi = np.where(refract[:, None],
-                      -wo / self.eta[:, None] + (c / self.eta - cos_t)[:, None] * n,
-                      2.0 * c[:, None] * n - wo)
+        wi = np.where(refract[:, None], refracted, reflected)
         with np.errstate(divide="ignore", invalid="ignore"):
             weight = np.where(refract[:, None],
                               (1.0 - F) * self.transmission_tint / (1.0 - P)[:, None],
@@ -500,12 +508,8 @@ class SmoothGlass:
         ((wi_reflected, R F), (wi_refracted, T (1 - F))), each (N, 3); their weights sum to
         ``albedo``, so one ray down each branch is ``sample``'s expectation without the pick's
         variance. Under total internal reflection the refracted weight is 0."""
-        c = np.clip(_dot(wo, n), 0.0, 1.0)
-        _, cos_t = fresnel_module.dielectric(c, self.eta)
-        F = self.fresnel.reflectance(c)
+        c, F, reflected, refracted = self._outcomes(wo, n)
         facing = (c > 0)[:, None]
-        reflected = 2.0 * c[:, None] * n - wo
-        refracted = -wo / self.eta[:, None] + (c / self.eta - cos_t)[:, None] * n
         return ((reflected, np.where(facing, F * self.reflection_tint, 0.0)),
                 (refracted, np.where(facing, (1.0 - F) * self.transmission_tint, 0.0)))
 
