@@ -47,14 +47,14 @@ entry face and crossed it again. The glass scene's worst region went from 11.09 
 to 7.73 % / 6.05 % (seeds 1 / 2). The copper sphere's highlight region over 14 seeds at
 ``final`` averages 1.000 of Cycles with a standard deviation of 2.2 % (seeds 1 and 2 are
 +3.1 % and +2.6 %; four seeds of 14 fall outside 3 %, two each way): noise, not a bias; at
-64 spp its deviation is 1.0 %. What it is not (seeds 1-4 unless said, the highlight region
-over Cycles'): the glossy direct light's samples (32 light samples: 0.979-1.007; light
-samples alone, without the lobe's own rays: 0.968-1.019; 8, as ``final``: 0.981-1.022 over
-seeds 1-6), nor the copper's reflected ray (four a hit instead of one: the same four values
-to 0.1 %). With shadow photons off it is 1.007-1.020 (deviation 0.6 %, mean +1.35 %), and
-seed 3's worst region falls from 4.0 % to 0.8 %: the suspect is the shadow-photon
-classification's change from seed to seed, which the sphere shows compressed (it reflects
-the room's penumbrae into a few pixels); open.
+64 spp its deviation is 1.0 %. It is the glossy direct light's sampling (seeds 1-6 at
+``final``, the two highlight regions over Cycles', standard deviation over seeds): 8 light
+samples give 0.981-1.040 (1.5 % / 1.6 %), 64 light samples 0.987-1.009 (0.3 % / 0.8 %),
+64 spp 0.985-1.008 (0.6 % / 0.9 %, seeds 1-4). Eight area-uniform samples of the 1 m light
+put few in the narrow GGX lobe of the 20-pixel highlight. It is not the shadow photons (off:
+0.949-1.020, 0.6 % / 2.4 %, seed 6 at 5.1 %) nor the caustic map (8 x its photons: the
+same values to 0.001). Open: more light samples for sharp glossy lobes (or sampling the
+light within the lobe's cone), then the render time measured again.
 
 At the camera's first two vertices smooth glass now splits (``integrator.GLASS_SPLIT_DEPTH``):
 one ray reflects with weight F, one refracts with 1 - F, where one of them was picked with
