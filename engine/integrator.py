@@ -19,8 +19,11 @@ What it computes
         * at a mirror: the reflected ray goes on with throughput rho_s, up to
           ``max_specular_depth`` bounces;
         * at a material with glossy lobes (``bsdf.glossy_material``: Principled metal and
-          specular layer, Glossy, Metallic; issue 23): their direct light from the same light
-          samples weighted by f (``direct.direct_terms(with_directions=True)``); the diffuse
+          specular layer, Glossy, Metallic; issue 23): their direct light from light samples
+          weighted by f (``direct.direct_terms(with_directions=True)``), ``light_samples`` x
+          a factor 1-8 that grows with the lobes' sharpness (``glossy_light_factor``,
+          ``GLOSSY_REFERENCE_PEAK``) so that a sharp highlight is not left to a few samples
+          that land on it; the diffuse
           below a Principled specular layer scaled by 1 - its albedo (Cycles' layering);
           then one ray by sampling a lobe: where the glossy lobes reflect more than the diffuse
           part the path goes on from it, elsewhere it ends and the ray is an emission probe
@@ -107,6 +110,18 @@ GLASS_SPLIT_DEPTH = 2
 # (each strategy still takes what the other cannot reach). The last two are for tests.
 GLOSSY_LIGHT_STRATEGY = "mis"
 
+# Light samples at glossy hits scale with the lobes' sharpness. A lobe narrower than the light
+# it reflects catches a share of area-uniform light samples about equal to its solid angle
+# over the light's, so its highlight's noise grows as 1 / that solid angle (~ 1 / the lobe's
+# peak density). A glossy hit takes ``light_samples`` x m, m = the power of two nearest its
+# lobes' peak density (pick share x pdf towards the mirror direction) over that of GGX at
+# Blender's default Roughness 0.5 (alpha 0.25) seen straight on, 1 / (4 pi alpha^2), and
+# between 1 and ``GLOSSY_LIGHT_FACTOR_MAX``: a Principled layer at the default roughness
+# keeps the base count, Roughness 0.3 metal takes 8x. Multiple importance sampling counts
+# the same m on both sides (``bsdf_strategy_weights``' ``light_counts``).
+GLOSSY_REFERENCE_PEAK = 1.0 / (4.0 * np.pi * 0.25 ** 2)
+GLOSSY_LIGHT_FACTOR_MAX = 8
+
 
 def power_heuristic(p_this: np.ndarray, p_other: np.ndarray) -> np.ndarray:
     """Veach's power heuristic (beta = 2): p_this^2 / (p_this^2 + p_other^2) per sample (N,),
@@ -121,21 +136,25 @@ def power_heuristic(p_this: np.ndarray, p_other: np.ndarray) -> np.ndarray:
     return np.where(np.isnan(out), np.where(p_other > 0, 0.0, 1.0), out)
 
 
-def _emitter_weights(context, prim, pdf, points, normals, directions) -> np.ndarray:
+def _emitter_weights(context, prim, pdf, points, normals, directions,
+                     light_counts) -> np.ndarray:
     """(N, 3) ``bsdf_strategy_weights`` of rays that meet emissive triangles ``prim``, per
     colour channel: a textured emitter samples each channel as its own light
-    (``lights.textured_emitters``), so each channel has its own light density."""
+    (``lights.textured_emitters``), so each channel has its own light density.
+    ``light_counts`` (N,): the light samples of the vertices the rays left."""
     which = context.lights.channel_emitters[prim]
     same = (which[:, 0] == which[:, 1]) & (which[:, 1] == which[:, 2])
     out = np.ones((len(prim), 3))
     if same.any():
         out[same] = bsdf_strategy_weights(context, which[same, 0], pdf[same], points[same],
-                                          normals[same], directions[same])[:, None]
+                                          normals[same], directions[same],
+                                          light_counts=light_counts[same])[:, None]
     rest = np.flatnonzero(~same)
     for channel in range(3) if len(rest) else ():
         out[rest, channel] = bsdf_strategy_weights(context, which[rest, channel], pdf[rest],
                                                    points[rest], normals[rest],
-                                                   directions[rest])
+                                                   directions[rest],
+                                                   light_counts=light_counts[rest])
     return out
 
 
@@ -153,13 +172,14 @@ def light_strategy_weights(p_light, p_bsdf, strategy: str | None = None) -> np.n
 
 
 def bsdf_strategy_weights(context, which, pdf, points, normals, directions,
-                          strategy: str | None = None) -> np.ndarray:
+                          strategy: str | None = None, light_counts=None) -> np.ndarray:
     """(N,) the weight of rays drawn by a lobe with densities ``pdf`` (inf: a delta, weight 1;
     None: camera rays, weight 1) from ``points`` with shading ``normals``, that meet light
     ``which`` (N,) of ``context.lights.sampled`` (-1: none, weight 1) along ``directions``:
     the complement of ``light_strategy_weights`` against the density of that vertex's light
     samples (``LightSet.sample_density``; 0 below the normal, where a light sample gives
-    nothing)."""
+    nothing). ``light_counts`` (N,): the light samples each vertex took (default
+    ``settings.light_samples``; glossy hits take more, ``_GlossyHits.light_counts``)."""
     count = len(which)
     if pdf is None:
         return np.ones(count)
@@ -171,10 +191,12 @@ def bsdf_strategy_weights(context, which, pdf, points, normals, directions,
     x, n = points[ask], normals[ask]
     w = np.asarray(directions[ask], np.float64)
     p_light = np.zeros(len(ask))
+    counts = (np.full(len(ask), context.settings.light_samples) if light_counts is None
+              else np.asarray(light_counts)[ask])
     for index in np.unique(which[ask]):
         sel = np.flatnonzero(which[ask] == index)
         p_light[sel] = context.lights.sample_density(x[sel], n[sel], w[sel], int(index),
-                                                     context.settings.light_samples)
+                                                     counts[sel])
     p_light *= sampling.dot_rows(n, w) > 0
     if strategy == "light":
         out[ask] = (p_light <= 0).astype(np.float64)
@@ -331,8 +353,9 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
     # Per ray after a bounce: the density its lobe drew it with (``bsdf.sample_glossy``: lobe
     # pick x lobe pdf; inf after a delta lobe or a mirror) and the vertex it left (point,
     # shading normal): the lights it meets count with the BSDF's weight of multiple importance
-    # sampling (``bsdf_strategy_weights``) against that vertex's light samples.
-    mis_pdf = mis_x = mis_n = None
+    # sampling (``bsdf_strategy_weights``) against that vertex's light samples (``mis_count``
+    # of them: ``_GlossyHits.light_counts``).
+    mis_pdf = mis_x = mis_n = mis_count = None
     # Per ray: an emission probe (from a glossy hit where the path ended, ``_GlossyHits``):
     # it counts the world or emitter it meets and is not shaded.
     probes = None
@@ -380,8 +403,8 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
             if len(seen):
                 value = glint[seen] * throughput[seen]
                 value *= bsdf_strategy_weights(context, which[seen], mis_pdf[seen],
-                                               mis_x[seen], mis_n[seen],
-                                               directions[seen])[:, None]
+                                               mis_x[seen], mis_n[seen], directions[seen],
+                                               light_counts=mis_count[seen])[:, None]
                 add_to_pixels(emission_sums, ray_of[seen] // spp, value)
                 if light is not None:
                     light.add(ray_of[seen], value, direct=depth == 1, kind=path_kind[seen])
@@ -399,7 +422,8 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
                 gone = ~hit
                 missed = missed * bsdf_strategy_weights(
                     context, np.full(int(gone.sum()), context.lights.world_index),
-                    mis_pdf[gone], mis_x[gone], mis_n[gone], directions[gone])[:, None]
+                    mis_pdf[gone], mis_x[gone], mis_n[gone], directions[gone],
+                    light_counts=mis_count[gone])[:, None]
 
             add_to_pixels(emission_sums, ray_of[~hit] // spp, missed)
             if light is not None:
@@ -418,6 +442,7 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
             kinds = None if path_kind is None else path_kind[hit]
             if mis_pdf is not None:
                 mis_pdf, mis_x, mis_n = mis_pdf[hit], mis_x[hit], mis_n[hit]
+                mis_count = mis_count[hit]
         else:
             t_hit, d, o, rays, thr = _t, directions, origins, ray_of, throughput
             probing = probes
@@ -443,7 +468,8 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
                 lit = np.flatnonzero(np.any(emitted > 0, axis=1))
                 if len(lit):
                     emitted[lit] *= _emitter_weights(context, prim[lit], mis_pdf[lit],
-                                                     mis_x[lit], mis_n[lit], d[lit])
+                                                     mis_x[lit], mis_n[lit], d[lit],
+                                                     mis_count[lit])
             add_to_pixels(emission_sums, pixel_of, emitted if thr is None else thr * emitted)
             if light is not None:
                 if depth == 0:
@@ -497,7 +523,8 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
         glossy = None
         if materials.has_glossy:
             glossy = _GlossyHits(materials, surface, -d, ns, front,
-                                 split=light is not None and depth == 0)
+                                 split=light is not None and depth == 0,
+                                 light_samples=settings.light_samples)
             if glossy.count == 0:
                 glossy = None
 
@@ -573,6 +600,7 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
             break
         idx = np.nonzero(mirror)[0]
         directions, weight, mis_pdf = surface.subset(idx).bsdf().mirror.sample(-d[idx], ns[idx])
+        mis_count = np.full(len(idx), settings.light_samples)
         if glossy is not None:
             # Smooth glass seen first splits: one ray reflects, one refracts, each with its
             # Fresnel share, so that a light's glint in the glass (a few percent reflected,
@@ -587,6 +615,7 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
             directions = np.concatenate([directions, g_dirs.astype(directions.dtype)])[keep]
             weight = np.concatenate([weight, g_weight])[keep]
             mis_pdf = np.concatenate([mis_pdf, g_pdf])[keep]
+            mis_count = np.concatenate([mis_count, glossy.light_counts[glossy_index]])[keep]
             probes = np.concatenate([np.zeros(mirrors, bool),
                                      ~glossy.goes_on[glossy_index]])[keep]
         else:
@@ -988,12 +1017,16 @@ class _GlossyHits:
     the hits where the path goes on, ``group_of`` / ``row_of`` (N,) each hit's material group
     and its row in that group's lobes, ``diffuse_factor`` (N, 3) the share of the diffuse below a Principled
     specular layer (1 elsewhere), ``ending_albedo`` (N, 3) the glossy albedo at ending hits
-    (0 elsewhere). With ``split`` (the light passes): ``reflected`` / ``transmitted`` (N, 3)
+    (0 elsewhere), ``light_counts`` (N,) the light samples each glossy hit takes
+    (``light_samples`` x its lobes' sharpness factor, ``GLOSSY_REFERENCE_PEAK``). With
+    ``split`` (the light passes): ``reflected`` / ``transmitted`` (N, 3)
     the lobes' albedo by branch (glass lobes split, ``lobes.SmoothGlass.albedo_split``) and
     ``ending_transmitted`` (N, 3) the transmitted part of ``ending_albedo``."""
 
-    def __init__(self, materials, surface, wo, n, front=None, split: bool = False):
+    def __init__(self, materials, surface, wo, n, front=None, split: bool = False,
+                 light_samples: int = 1):
         count = len(surface)
+        self.light_counts = np.full(count, int(light_samples))
         self.front = np.ones(count, bool) if front is None else np.asarray(front, bool)
         self.mask = surface.camera_glossy
         self.index = np.flatnonzero(self.mask)
@@ -1032,8 +1065,10 @@ class _GlossyHits:
             goes_on = albedo.max(axis=1) > diffuse.max(axis=1)
             self.goes_on[hits] = goes_on
             self.ending_albedo[hits] = albedo * ~goes_on[:, None]
-            self.groups.append((hits, lobes, lobe_shares([(w, lobe) for w, lobe, _ in lobes],
-                                                         wo_h, n_h)))
+            shares = lobe_shares([(w, lobe) for w, lobe, _ in lobes], wo_h, n_h)
+            self.groups.append((hits, lobes, shares))
+            self.light_counts[hits] = light_samples * glossy_light_factor(lobes, shares,
+                                                                          wo_h, n_h)
             if split:
                 for w, lobe, _ in lobes:
                     if hasattr(lobe, "albedo_split"):
@@ -1105,43 +1140,73 @@ class _GlossyHits:
         return f
 
 
+def glossy_light_factor(lobes, shares, wo, n) -> np.ndarray:
+    """(k,) the factor on the light samples of k glossy hits (``GLOSSY_REFERENCE_PEAK``): the
+    power of two nearest their non-delta lobes' largest pick share x pdf towards the mirror
+    direction of ``wo`` about ``n``, over the reference, within [1, GLOSSY_LIGHT_FACTOR_MAX]."""
+    mirror = 2.0 * sampling.dot_rows(wo, n)[:, None] * n - wo
+    peak = np.zeros(len(wo))
+    for j, (_w, lobe, delta) in enumerate(lobes):
+        if not delta:
+            peak = np.maximum(peak, shares[:, j] * lobe.pdf(wo, mirror, n))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        steps = np.round(np.log2(peak / GLOSSY_REFERENCE_PEAK))
+    top = np.log2(GLOSSY_LIGHT_FACTOR_MAX)
+    steps = np.clip(np.nan_to_num(steps, nan=0.0, posinf=top, neginf=0.0), 0, top)
+    return (2 ** steps.astype(np.int64)).astype(np.int64)
+
+
+def _glossy_direct_part(context, stats, rng, glossy, part, x, ns, ng, light_samples):
+    """(len(part), 3) the glossy lobes' direct light at the glossy hits ``part`` (positions in
+    ``glossy.index``), each from ``light_samples`` light samples weighted by multiple
+    importance sampling against the lobes' rays (``_GlossyHits.radiance``)."""
+    at_part = glossy.index[part]
+    shadow_stats = {}
+    terms = direct_terms(x[at_part], ns[at_part], context.lights, context.accel, rng,
+                         light_samples, stats=shadow_stats, offset_normals=ng[at_part],
+                         ray_log=context.ray_log, shadow_map=context.shadow_map,
+                         with_directions=True)
+    stats["shadow_rays"] += shadow_stats.get("shadow_rays", 0)
+    stats["trace_seconds"] += shadow_stats.get("trace_seconds", 0.0)
+    radiance = np.zeros((len(part), 3))
+    everyone = np.arange(len(part))
+    lights = context.lights
+    for target, scalar, rgb, dirs, hittable, index in terms:
+        target = everyone if target is None else target
+        p_light = meets = None
+        at = at_part[target]
+        if hittable:
+            # A light the lobes' rays meet too: multiple importance sampling.
+            p_light = lights.sample_density(x[at], ns[at], dirs, index, light_samples)
+            p_light *= sampling.dot_rows(ns[at].astype(np.float64), dirs) > 0
+            if hittable == "area":
+                meets = lights.sampled[index].intersect(x[at].astype(np.float64), dirs,
+                                                        np.inf)[1] > 0
+        f = glossy.radiance(part[target], dirs, p_light, meets)
+        rgb = np.asarray(rgb, np.float64)
+        contribution = f * (scalar[:, None] * (rgb if rgb.ndim == 2 else rgb[None]))
+        for c in range(3):
+            radiance[:, c] += np.bincount(target, weights=contribution[:, c],
+                                          minlength=len(part))
+    return radiance
+
+
 def _shade_glossy_direct(context, stats, rng, glossy, x, ns, ng, thr, rays, spp, direct_sums,
                          light=None, depth=0, kinds=None):
     """Direct light reflected by the glossy lobes: light samples at the glossy hits
     (``direct.direct_terms`` with their directions), each weighted by the lobes' f and, for
     lights the lobes' rays meet as well, by the light's weight of multiple importance sampling
-    (``_GlossyHits.radiance``) (into
+    (``_GlossyHits.radiance``); each hit takes ``_GlossyHits.light_counts`` samples, hits with
+    the same count in one batch (``_glossy_direct_part``) (into
     ``light``'s passes: Glossy Direct at the first hit ``depth`` 0, where light samples reach
     only the reflection side; the path's kind's Indirect after)."""
-    settings = context.settings
     idx = glossy.index
-    shadow_stats = {}
-    terms = direct_terms(x[idx], ns[idx], context.lights, context.accel, rng,
-                         settings.light_samples, stats=shadow_stats, offset_normals=ng[idx],
-                         ray_log=context.ray_log, shadow_map=context.shadow_map,
-                         with_directions=True)
-    stats["shadow_rays"] += shadow_stats.get("shadow_rays", 0)
-    stats["trace_seconds"] += shadow_stats.get("trace_seconds", 0.0)
     radiance = np.zeros((len(idx), 3))
-    everyone = np.arange(len(idx))
-    lights = context.lights
-    for target, scalar, rgb, dirs, hittable, index in terms:
-        target = everyone if target is None else target
-        p_light = meets = None
-        if hittable:
-            # A light the lobes' rays meet too: multiple importance sampling.
-            at = idx[target]
-            p_light = lights.sample_density(x[at], ns[at], dirs, index, settings.light_samples)
-            p_light *= sampling.dot_rows(ns[at].astype(np.float64), dirs) > 0
-            if hittable == "area":
-                meets = lights.sampled[index].intersect(x[at].astype(np.float64), dirs,
-                                                        np.inf)[1] > 0
-        f = glossy.radiance(target, dirs, p_light, meets)
-        rgb = np.asarray(rgb, np.float64)
-        contribution = f * (scalar[:, None] * (rgb if rgb.ndim == 2 else rgb[None]))
-        for c in range(3):
-            radiance[:, c] += np.bincount(target, weights=contribution[:, c],
-                                          minlength=len(idx))
+    counts = glossy.light_counts[idx]
+    for count in np.unique(counts):
+        part = np.flatnonzero(counts == count)
+        radiance[part] = _glossy_direct_part(context, stats, rng, glossy, part, x, ns, ng,
+                                             int(count))
     if thr is not None:
         radiance *= thr[idx]
     add_to_pixels(direct_sums, rays[idx] // spp, radiance)

@@ -1111,9 +1111,10 @@ class LightSet:
         w += 0.02 * w.mean(axis=1, keepdims=True) + 1e-30
         return w / w.sum(axis=1, keepdims=True)
 
-    def sample_density(self, points, normals, wi, index, light_samples: int) -> np.ndarray:
+    def sample_density(self, points, normals, wi, index, light_samples) -> np.ndarray:
         """(N,) the density [1/sr] with which ``direct.direct_terms`` (``light_samples``
-        samples per point shared by the sampled lights) draws the directions ``wi`` from
+        samples per point shared by the sampled lights: one count, or (N,) counts per point)
+        draws the directions ``wi`` from
         light ``index`` of ``sampled`` at ``points`` with shading ``normals``: light_samples x
         its selection probability (``selection_weights``) x its ``solid_angle_pdf``. The
         light weight of multiple importance sampling (Veach 1997 §9.2.2, counts included)."""

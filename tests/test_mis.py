@@ -14,19 +14,27 @@ over each light's surface (nothing of the renderer's sampling used). MIS, light 
 and the lobes' rays alone must each give it.
 
 Measured (``MEASURED``, seeds 0-7 at 64 spp, 8 x 8 px, 4 light samples): the image mean's
-relative SD per render is 1.2 % with MIS, 1.45 % with light samples alone, 1.9 % with the
-rays alone, and the means over the seeds lie within 0.3 % of the quadrature. The tolerances
+relative SD per render is 0.52 % with MIS and with light samples alone, 1.9 % with the rays
+alone, and the means over the seeds lie within 0.2 % of the quadrature. The plane's sharper
+lobe (roughness 0.15) makes its hits take 8 x 4 light samples (``integrator.
+glossy_light_factor``); with the factor held at 1 the MIS figure is 1.15 %. The tolerances
 are 4 SD of the mean of ``SEEDS`` renders plus 0.5 % (quadrature at 200^2 points per light:
-1e-6; the patch's spread). Dropping either weight (light samples' or rays' weight set to 1)
-counts a light twice where the other strategy also takes it: +33 % and +68 % here, which
-``test_a_dropped_weight_is_caught`` checks the MIS test would see.
+1e-6; the patch's spread).
+
+Dropping either weight (light samples' or rays' weight set to 1) counts a light twice where
+the other strategy also takes it. With equal counts on both sides (the factor held at 1)
+that is +68 % and +32 % here, which ``test_a_dropped_weight_is_caught`` checks the MIS test
+would see (with 8x the light samples the rays' weight is small and dropping the light
+samples' weight only adds +1.3 %). The rays' weight must count the light samples the vertex
+really took: computed with the base count instead, the image is +31 % off
+(``test_a_miscounted_light_sample_density_is_caught``).
 """
 import numpy as np
 import pytest
 
 from analytic import quad
 from lanterna.engine import integrator, pipeline
-from lanterna.engine.bsdf import glossy_material
+from lanterna.engine.bsdf import glossy_material, lobe_shares
 from lanterna.engine.lights import (EllipseEmitter, LightSet, SphereLight, SunCone,
                                     TriangleEmitter, WorldLight)
 from lanterna.engine.scene import (AreaLight, Camera, Material, PointLight, Scene, SunLight,
@@ -210,8 +218,8 @@ EYE = np.array([0.0, -7.0, 7.0])          # wo at 45 degrees; the mirror directi
 SEEDS = 3
 # strategy: (relative SD of one render's image mean (largest channel), mean over 8 seeds /
 # quadrature - 1 (largest channel)), measured at 64 spp, seeds 0-7.
-MEASURED = {"mis": (0.0123, -0.0029), "light": (0.0145, -0.0019), "bsdf": (0.0189, 0.0012)}
-# 4 SD of the mean of SEEDS renders + 0.5 %: mis 3.3 %, light samples 3.9 %, rays 4.9 %.
+MEASURED = {"mis": (0.0052, -0.0016), "light": (0.0052, -0.0017), "bsdf": (0.0189, 0.0012)}
+# 4 SD of the mean of SEEDS renders + 0.5 %: mis 1.7 %, light samples 1.7 %, rays 4.9 %.
 TOLERANCE = {name: 4 * sd / np.sqrt(SEEDS) + 0.005 for name, (sd, _bias) in MEASURED.items()}
 
 
@@ -357,11 +365,51 @@ def test_each_strategy_gives_the_lights_integral(strategy, reference):
 @pytest.mark.parametrize("dropped", ["bsdf_strategy_weights", "light_strategy_weights"])
 def test_a_dropped_weight_is_caught(dropped, reference, monkeypatch):
     """A renderer that counts the lobes' rays with weight 1 (measured +68 % on this scene)
-    or the light samples with weight 1 (+33 %) counts a light twice where both strategies
-    reach it: the MIS test above must fail on it."""
+    or the light samples with weight 1 (+32 %) counts a light twice where both strategies
+    reach it: the MIS test above must fail on it. Both sides take the same light samples
+    here (``GLOSSY_LIGHT_FACTOR_MAX`` 1), where each strategy carries a large share."""
     def weight_one(*args, **kwargs):
         # bsdf_strategy_weights(context, which, ...), light_strategy_weights(p_light, ...)
         return np.ones(len(args[1] if dropped == "bsdf_strategy_weights" else args[0]))
 
+    monkeypatch.setattr(integrator, "GLOSSY_LIGHT_FACTOR_MAX", 1)
     monkeypatch.setattr(integrator, dropped, weight_one)
     assert _error("mis", reference) > 3 * TOLERANCE["mis"]
+
+
+def test_a_miscounted_light_sample_density_is_caught(reference, monkeypatch):
+    """The lobes' rays weighted against the base ``light_samples`` where the glossy hit took
+    8x as many (measured +31 %): the MIS test must fail on it."""
+    counted = integrator.bsdf_strategy_weights
+
+    def base_count(*args, light_counts=None, **kwargs):
+        return counted(*args, **kwargs)
+
+    monkeypatch.setattr(integrator, "bsdf_strategy_weights", base_count)
+    assert _error("mis", reference) > 3 * TOLERANCE["mis"]
+
+
+@pytest.mark.parametrize("closure, view, expected", [
+    # Roughness 0.3 metal straight on: GGX peak 1 / (4 pi 0.09^2) ~ 12x the reference -> 8.
+    (Closure("metallic", params={"base_color": (0.9, 0.6, 0.4), "roughness": 0.3}), 0.0, 8),
+    (Closure("glossy", params={"color": (0.8,) * 3, "roughness": 0.15}), 0.0, 8),
+    # Blender's default Roughness 0.5 seen straight on: the reference itself -> 1.
+    (Closure("glossy", params={"color": (0.8,) * 3, "roughness": 0.5}), 0.0, 1),
+    (Closure("glossy", params={"color": (0.8,) * 3, "roughness": 0.8}), 0.0, 1),
+    # Roughness 0.4 (alpha 0.16): 0.25^2 / 0.16^2 = 2.4 -> 2.
+    (Closure("glossy", params={"color": (0.8,) * 3, "roughness": 0.4}), 0.0, 2),
+    # A Principled dielectric at Blender's defaults: its specular layer keeps the base count,
+    # straight on and at 60 degrees (where its share of the light grows).
+    (Closure("principled"), 0.0, 1),
+    (Closure("principled"), np.radians(60), 2),
+    (Closure("principled", params={"metallic": 1.0, "roughness": 0.3}), 0.0, 8),
+])
+def test_glossy_light_factor_grows_with_the_lobes_sharpness(closure, view, expected):
+    """The light samples' factor at a glossy hit: the power of two nearest the lobes' peak
+    density over that of GGX alpha 0.25 straight on, clipped to [1, 8]."""
+    glossy = glossy_material([closure])
+    n = np.array([[0.0, 0.0, 1.0]])
+    wo = np.array([[np.sin(view), 0.0, np.cos(view)]])
+    lobes = glossy.entries(1, wo, n)
+    shares = lobe_shares([(w, lobe) for w, lobe, _ in lobes], wo, n)
+    assert integrator.glossy_light_factor(lobes, shares, wo, n).tolist() == [expected]
