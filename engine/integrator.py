@@ -114,11 +114,13 @@ GLOSSY_LIGHT_STRATEGY = "mis"
 # it reflects catches a share of area-uniform light samples about equal to its solid angle
 # over the light's, so its highlight's noise grows as 1 / that solid angle (~ 1 / the lobe's
 # peak density). A glossy hit takes ``light_samples`` x m, m = the power of two nearest its
-# lobes' peak density (pick share x pdf towards the mirror direction) over that of GGX at
-# Blender's default Roughness 0.5 (alpha 0.25) seen straight on, 1 / (4 pi alpha^2), and
-# between 1 and ``GLOSSY_LIGHT_FACTOR_MAX``: a Principled layer at the default roughness
-# keeps the base count, Roughness 0.3 metal takes 8x. Multiple importance sampling counts
-# the same m on both sides (``bsdf_strategy_weights``' ``light_counts``).
+# lobes' peak density (pick share x pdf towards the mirror direction) times their share of
+# what the hit reflects (glossy over glossy + diffuse albedo: a highlight that is a few per
+# cent of the pixel adds little noise to it), over the peak of GGX at Blender's default
+# Roughness 0.5 (alpha 0.25) seen straight on, 1 / (4 pi alpha^2), and between 1 and
+# ``GLOSSY_LIGHT_FACTOR_MAX``: a Principled dielectric keeps the base count, Roughness 0.3
+# metal takes 8x. Multiple importance sampling counts the same m on both sides
+# (``bsdf_strategy_weights``' ``light_counts``).
 GLOSSY_REFERENCE_PEAK = 1.0 / (4.0 * np.pi * 0.25 ** 2)
 GLOSSY_LIGHT_FACTOR_MAX = 8
 
@@ -1067,8 +1069,8 @@ class _GlossyHits:
             self.ending_albedo[hits] = albedo * ~goes_on[:, None]
             shares = lobe_shares([(w, lobe) for w, lobe, _ in lobes], wo_h, n_h)
             self.groups.append((hits, lobes, shares))
-            self.light_counts[hits] = light_samples * glossy_light_factor(lobes, shares,
-                                                                          wo_h, n_h)
+            self.light_counts[hits] = light_samples * glossy_light_factor(
+                lobes, shares, wo_h, n_h, glossy_energy_share(albedo, diffuse))
             if split:
                 for w, lobe, _ in lobes:
                     if hasattr(lobe, "albedo_split"):
@@ -1140,15 +1142,30 @@ class _GlossyHits:
         return f
 
 
-def glossy_light_factor(lobes, shares, wo, n) -> np.ndarray:
+def glossy_energy_share(glossy_albedo, diffuse_albedo) -> np.ndarray:
+    """(k,) the glossy lobes' share of what k hits reflect: the glossy albedo's channel sum
+    over that of glossy + the diffuse left below them (1 where both are 0)."""
+    glossy = np.asarray(glossy_albedo, np.float64).sum(axis=1)
+    total = glossy + np.asarray(diffuse_albedo, np.float64).sum(axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(total > 0.0, glossy / np.where(total > 0.0, total, 1.0), 1.0)
+
+
+def glossy_light_factor(lobes, shares, wo, n, energy_share=None) -> np.ndarray:
     """(k,) the factor on the light samples of k glossy hits (``GLOSSY_REFERENCE_PEAK``): the
     power of two nearest their non-delta lobes' largest pick share x pdf towards the mirror
-    direction of ``wo`` about ``n``, over the reference, within [1, GLOSSY_LIGHT_FACTOR_MAX]."""
+    direction of ``wo`` about ``n``, times the glossy lobes' ``energy_share`` (k,) of what
+    the hit reflects (``glossy_energy_share``; default 1), over the reference, within
+    [1, GLOSSY_LIGHT_FACTOR_MAX]. A highlight that carries a few per cent of a pixel beside
+    its diffuse (a Principled dielectric's specular layer) adds little noise to it, so it
+    keeps the base count; a metal's or a glossy floor's takes the full factor."""
     mirror = 2.0 * sampling.dot_rows(wo, n)[:, None] * n - wo
     peak = np.zeros(len(wo))
     for j, (_w, lobe, delta) in enumerate(lobes):
         if not delta:
             peak = np.maximum(peak, shares[:, j] * lobe.pdf(wo, mirror, n))
+    if energy_share is not None:
+        peak = peak * np.asarray(energy_share, np.float64)
     with np.errstate(divide="ignore", invalid="ignore"):
         steps = np.round(np.log2(peak / GLOSSY_REFERENCE_PEAK))
     top = np.log2(GLOSSY_LIGHT_FACTOR_MAX)
