@@ -294,8 +294,13 @@ def scene_sentence(s: dict, suite: Suite | None = None) -> str:
     elif c["status"] == "interpolated":
         why += f"; Cycles reaches that error in {c['seconds']:.1f} s"
         if s["scene"] == suite.goal_scene and not goal_met(c):
-            why += (f", so the goal needs final at this error in <= "
-                    f"{GOAL_RATIO * c['seconds']:.1f} s")
+            budget = GOAL_RATIO * c["seconds"]
+            rest = lan["seconds"] - lan["stages"].get("camera", 0.0)
+            why += (f", so the goal needs final at this error in <= {budget:.1f} s; "
+                    f"everything but the camera stage takes {rest:.1f} s" + (
+                        ", more than that budget on its own" if rest >= budget else
+                        f", which leaves the camera {budget - rest:.1f} s (it takes "
+                        f"{lan['seconds'] - rest:.1f} s)"))
     elif c["status"] == "beyond":
         last = s["cycles_rows"][-1]
         why += (f"; Cycles is still at {100 * last['error']:.2f} % after "

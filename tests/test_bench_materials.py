@@ -78,6 +78,9 @@ def test_section_replaced_and_the_rest_kept():
     assert "![error against time, per scene](materials/plot.png)" in section
     assert "**principled_room**: misses the goal (ratio 0.6" in section    # 10 s / 16 s
     assert "camera 6.0 s (60 %), photons 3.0 s (30 %)" in section          # lights < 5 %: left out
+    # Budget 0.5 x 16 s = 8 s; everything but the camera 10 - 6 = 4 s.
+    assert ("needs final at this error in <= 8.0 s; everything but the camera stage takes "
+            "4.0 s, which leaves the camera 4.0 s (it takes 6.0 s)") in section
     assert "below 16 spp" in section and "**>= 2.00**" in section
     doc = "# Performance\n\nintro\n\n## A\n\ntable\n"
     once = materials.replace_section(doc, section)
