@@ -42,7 +42,7 @@ PYTHON_3.13 = $(PYTHON313)
 COMPAT_TESTS := tests/test_blender_engine.py tests/test_ui.py tests/test_export.py \
                 tests/test_cli.py tests/test_ase.py tests/test_overlay.py \
                 tests/test_extension.py tests/test_farm.py tests/test_settings.py \
-                tests/test_portability.py
+                tests/test_portability.py tests/test_node_bake.py
 
 # $(call need_python,INTERPRETER,3.X): stop with a message when that Python was not found.
 need_python = @test -n "$(1)" || { echo "make: Python $(2) not found (looked for python$(2) on the \

@@ -420,7 +420,10 @@ def test_a_loop_of_shader_nodes_is_named_in_a_warning():
     assert any("'Mix A'" in w and "'Mix B'" in w for w in loops), loops
 
 
-def test_unsupported_texture_gives_one_warning_and_default_colour():
+def test_unsupported_texture_gives_one_warning_and_is_baked():
+    """A node outside the evaluator (Brick) on three cubes' material: baked once by Cycles
+    through the first cube's UVs (``node_bake``), one warning naming the material, socket,
+    node, the fallback and the cubes that share the bake."""
     scene = reset()
     add_camera(scene)
     mat = new_material("Wood")
@@ -434,9 +437,32 @@ def test_unsupported_texture_gives_one_warning_and_default_colour():
     wood = [w for w in s.warnings if "Wood" in w and "driven by" in w]
     assert len(wood) == 1       # one per material and socket, not one per object
     assert "Material 'Wood'" in wood[0] and "Base Color" in wood[0] and "Brick" in wood[0]
+    assert "baked by Cycles" in wood[0] and "of 'Plank1'" in wood[0], wood[0]
+    assert "'Plank2', 'Plank3' read the same image" in wood[0], wood[0]
+    np.testing.assert_allclose(material_of(s, "Wood").diffuse, [0.3, 0.2, 0.1], rtol=1e-6)
+    assert "base_color" in material_of(s, "Wood").closures[0].textures
+    assert len(s.materials) == 1
+
+
+def test_unsupported_texture_without_uvs_gives_one_warning_and_default_colour():
+    scene = reset()
+    add_camera(scene)
+    mat = new_material("Wood")
+    p = principled(mat)
+    p.inputs["Base Color"].default_value = (0.3, 0.2, 0.1, 1.0)
+    tex = mat.node_tree.nodes.new("ShaderNodeTexBrick")     # not in the node evaluator
+    mat.node_tree.links.new(tex.outputs["Color"], p.inputs["Base Color"])
+    for name in ("Plank1", "Plank2"):
+        cube = add_cube(scene, name)
+        cube.data.materials.append(mat)
+        while len(cube.data.uv_layers):
+            cube.data.uv_layers.remove(cube.data.uv_layers[0])
+    s = export()
+    wood = [w for w in s.warnings if "Wood" in w and "driven by" in w]
+    assert len(wood) == 1
+    assert "using its default colour" in wood[0] and "no mesh object" in wood[0], wood[0]
     np.testing.assert_allclose(material_of(s, "Wood").diffuse, [0.3, 0.2, 0.1], rtol=1e-6)
     assert not material_of(s, "Wood").closures[0].textures
-    assert len(s.materials) == 1
 
 
 def test_image_texture_on_base_color_is_per_hit():

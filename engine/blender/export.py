@@ -51,9 +51,11 @@ animation already applied by Blender) and turns it into the renderer's inert sce
   follows the texture at each hit and what takes its mean, and each approximation is
   reported); the per-corner coordinates the graphs read (UV maps, object-space position and
   normal, generated coordinates, colour attributes for Color Attribute and geometry attributes
-  for Attribute nodes: ``_read_attributes``) go onto ``Scene.corner_attributes``. Any other link is
-  reported once per material and socket, naming the node it cannot evaluate, and the socket's
-  default value is used. rho_d and rho_s are clipped to [0, 1] and scaled down per channel where
+  for Attribute nodes: ``_read_attributes``) go onto ``Scene.corner_attributes``. An input
+  driven by a node the evaluator does not support is baked by Cycles into an image read
+  through the UVs (``node_bake``), or, where a bake cannot hold it (it reads the ray, no UV
+  map, a vector), takes the socket's default; either way the report names the material, the
+  socket, the node and which fallback was taken. rho_d and rho_s are clipped to [0, 1] and scaled down per channel where
   rho_d + rho_s > 1, with a warning. Emissive meshes need no light objects: the core builds
   mesh lights from triangles whose material has ``exitance`` > 0 (``emit_both_sides`` True,
   as Cycles emits from both faces).
@@ -143,6 +145,7 @@ from .. import textures
 from .world_export import (CAMERA_RAY, LIGHTING_RAY, constant_for_ray, decided_socket,
                            decided_source, environment_of, graph_maker, light_path_outputs)
 from ..shaders import CLOSURE_KINDS, Closure, seed_reduction
+from . import node_bake
 from .node_export import export_graph
 from ..scene import (AREA_SHAPES, AreaLight, Camera, Material, PointLight, Scene, SceneError,
                      SpotLight, SunLight, World)
@@ -614,10 +617,13 @@ class _NodeReader:
     (``driven``; :meth:`attach_textures`)."""
 
     def __init__(self, owner: str, warn: _Warnings, tree=None, images: dict | None = None,
-                 constants=None):
+                 constants=None, baker=None, material=None):
         self.owner = owner      # e.g. "Material 'Wood'"
         self.warn = warn
         self.tree = tree
+        # A material's: ``node_bake.NodeBaker`` for inputs driven by unsupported nodes, and
+        # the bpy material it bakes (None: such inputs take their sockets' defaults).
+        self.baker, self.material = baker, material
         # A world's: (Light Path inputs, graph maker): linked inputs whose nodes need nothing
         # per hit are evaluated to one constant for that ray (``world_export.CAMERA_RAY``).
         self.constants = constants
@@ -646,6 +652,36 @@ class _NodeReader:
             return None, f"a coordinate that is not exported ({error})"
         self.coordinates |= recorder.asked
         return socket, ""
+
+    def _baked_socket(self, src_node, out, fallback: str):
+        """(graph socket of a Cycles bake of the subtree feeding ``out``, the report's words
+        for it), or (None, ``fallback`` with the reason no bake was made): the bake's image
+        (``node_bake``) read by an Image Texture (Linear, Extend) through the UV map it was
+        baked through, added to the graph."""
+        try:
+            image, uv_name, note = self.baker.bake(self.material, src_node, out)
+        except node_bake.BakeRefused as refused:
+            return None, f"{fallback} ({refused})"
+        except (RuntimeError, ValueError, KeyError) as error:
+            return None, (f"{fallback} (Blender's bake failed: "
+                          f"{' '.join(str(error).split())})")
+        name = f"lanterna bake: {src_node.name} {out.identifier}"
+        uv_node, texture = f"{name} (UV)", f"{name} (image)"
+        self.graph.images[name] = image
+        self.graph.nodes[uv_node] = nodes.Node("ShaderNodeUVMap", uv_node, {"uv_map": uv_name},
+                                               {}, {"UV": "VECTOR"})
+        self.graph.nodes[texture] = nodes.Node(
+            "ShaderNodeTexImage", texture,
+            {"interpolation": "Linear", "projection": "FLAT", "extension": "EXTEND",
+             "image": name}, {"Vector": ("VECTOR", [0.0, 0.0, 0.0])},
+            {"Color": "RGBA", "Alpha": "VALUE"})
+        self.graph.links[(texture, "Vector")] = (uv_node, "UV")
+        socket = (texture, "Color")
+        recorder = _CoordinateRecorder()
+        nodes.evaluate(self.graph, socket, recorder, n=1)
+        self.coordinates |= recorder.asked
+        size = image.pixels.shape[1]
+        return socket, f"baked by Cycles into a {size}x{size} image {note}"
 
     def attach_textures(self, closure: Closure, node) -> Closure:
         """``closure`` with ``textures`` for each of its parameters whose sockets are driven
@@ -729,12 +765,18 @@ class _NodeReader:
                 return convert(evaluated)
         if self.tree is not None:
             socket, reason = self._graph_socket(src_node, out)
-            if socket is not None:
+            fallback = f"using its default {what} {_fmt(value)}"
+            if socket is None and reason.startswith("unsupported node") and \
+                    self.baker is not None:
+                socket, fallback = self._baked_socket(src_node, out, fallback)
+                if socket is not None:
+                    self.driven[(node.name, tuple(names))] = (socket, value, sock.name)
+            elif socket is not None:
                 self.driven[(node.name, tuple(names))] = (socket, value, sock.name)
                 self.values[(node.name, tuple(names))] = value
                 return value
             self.warn(f"{self.owner}: {sock.name} of '{node.name}' is driven by nodes Lanterna "
-                      f"cannot evaluate ({reason}); using its default {what} {_fmt(value)}")
+                      f"cannot evaluate ({reason}); {fallback}")
             return value
         self._linked_warning(node, sock, src_node, what, value)
         return value
@@ -985,7 +1027,8 @@ def _material_coordinates(material) -> set:
     return keys
 
 
-def _convert_material(mat, warn: _Warnings, images: dict | None = None) -> Material:
+def _convert_material(mat, warn: _Warnings, images: dict | None = None,
+                      baker=None) -> Material:
     """A Blender material -> :class:`Material` (see the module docstring)."""
     name = mat.name
     props = getattr(mat, "lanterna", None)
@@ -995,16 +1038,19 @@ def _convert_material(mat, warn: _Warnings, images: dict | None = None) -> Mater
         e = getattr(props, "exitance", (0.0, 0.0, 0.0))
         d, s, e = _clamp_reflectances(name, d[:3], s[:3], e[:3], warn)
         return Material(name, diffuse=d, specular=s, exitance=e)
-    return material_from_nodes(mat, warn, images)
+    return material_from_nodes(mat, warn, images, baker)
 
 
-def material_from_nodes(mat, warn=None, images: dict | None = None) -> Material:
+def material_from_nodes(mat, warn=None, images: dict | None = None,
+                        baker=None) -> Material:
     """The :class:`Material` derived from ``mat``'s node tree (or its viewport colour when it
     has none), whatever its ``derive_from_nodes`` says: the rules of the module docstring,
     clamped as the render clamps them. ``warn`` (a callable taking a message; default: the
     messages are dropped) receives what the derivation had to approximate; ``images`` (name
     -> ``nodes.Image``) is shared between materials so each image is read once. The Material
-    panel shows these values read-only (node-driven inputs at their sockets' own values)."""
+    panel shows these values read-only (node-driven inputs at their sockets' own values).
+    ``baker`` (``node_bake.NodeBaker``; default None: sockets' defaults) bakes inputs driven
+    by nodes the evaluator does not support."""
     warn = warn if warn is not None else _Warnings()
     name = mat.name
     tree = mat.node_tree
@@ -1013,7 +1059,7 @@ def material_from_nodes(mat, warn=None, images: dict | None = None) -> Material:
         d, s, e = _clamp_reflectances(name, mat.diffuse_color[:3], (0, 0, 0), (0, 0, 0), warn)
         return Material(name, diffuse=d, specular=s, exitance=e)
 
-    reader = _NodeReader(f"Material '{name}'", warn, tree, images)
+    reader = _NodeReader(f"Material '{name}'", warn, tree, images, baker=baker, material=mat)
     out = _active_output(tree, "OUTPUT_MATERIAL")
     if out is None:
         warn(f"Material '{name}' has no Material Output node; rendered black")
@@ -1369,6 +1415,7 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
     images: dict = {}                       # image name -> nodes.Image, read once
     material_index: dict[int, int] = {}     # Blender material pointer -> index
     default_id: list[int] = []              # index of the default grey, created on demand
+    baker = node_bake.NodeBaker(depsgraph)  # Cycles bakes of unsupported node subtrees
 
     def material_id(mat) -> int:
         if mat is None:
@@ -1379,7 +1426,7 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
         key = getattr(mat, "original", mat).as_pointer()
         if key not in material_index:
             material_index[key] = len(materials)
-            materials.append(_convert_material(mat, warn, images))
+            materials.append(_convert_material(mat, warn, images, baker))
         return material_index[key]
 
     object_names: list[str] = []
