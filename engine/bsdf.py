@@ -270,15 +270,18 @@ class MaterialTable:
         return out
 
     def at(self, material_ids: np.ndarray, prim=None, bu=None, bv=None,
-           directions=None, camera=None) -> "SurfaceParams":
+           directions=None, camera=None, ray=None) -> "SurfaceParams":
         """The parameters at hits on triangles of ``material_ids`` (N,): the one function
         through which every stage reads a material. ``prim`` (N,) the triangles and (bu, bv)
         the barycentrics of the hits: textured materials read their per-hit values there
         (without them, their means over the surface); ``directions`` (N, 3) the rays'
         (camera, gather, photon), for inputs that read the view (Fresnel, Layer Weight,
         Geometry: ``textures.MaterialTextures.view_at``); ``camera`` (N,) bool, the hits of
-        camera rays, for Light Path's Is Camera Ray (None: none are)."""
-        return SurfaceParams(self, np.asarray(material_ids), prim, bu, bv, directions, camera)
+        camera rays, for Light Path's Is Camera Ray (None: none are); ``ray`` {Light Path
+        output: scalar or (N,)}, the rays' other Light Path values (``textures.RAY_VALUES``;
+        None: 0, a camera ray's)."""
+        return SurfaceParams(self, np.asarray(material_ids), prim, bu, bv, directions, camera,
+                             ray)
 
 
 # SurfaceParams slots that textures make per-hit (the rest stay per material): those of the
@@ -299,7 +302,7 @@ class SurfaceParams:
     ``exitance``, each part evaluated when one of its slots is first read)."""
 
     def __init__(self, table: MaterialTable, material: np.ndarray, prim=None, bu=None,
-                 bv=None, directions=None, camera=None):
+                 bv=None, directions=None, camera=None, ray=None):
         self.table = table
         self.material = material            # (N,) material ids (per-material fast paths)
         self.hits = None if prim is None or not table.textures.any else (
@@ -310,6 +313,11 @@ class SurfaceParams:
         self.camera = None if camera is None or self.hits is None \
             or not table.textures.light_path.any() else \
             np.broadcast_to(np.asarray(camera, bool), (len(material),))
+        # {Light Path output: (N,)}: the rays' other Light Path values (else None)
+        self.ray = None if not ray or self.hits is None \
+            or not table.textures.light_path.any() else \
+            {k: np.broadcast_to(np.asarray(v, np.float64), (len(material),))
+             for k, v in ray.items()}
         self._cache = {}
 
     def __len__(self):
@@ -344,6 +352,8 @@ class SurfaceParams:
                                       None if self.directions is None else self.directions[at])
         if textures.light_path[material_id] and self.camera is not None:
             values = {**(values or {}), CAMERA_FLAG: self.camera[at].astype(np.float64)}
+        if textures.light_path[material_id] and self.ray is not None:
+            values = {**(values or {}), **{f"ray:{k}": v[at] for k, v in self.ray.items()}}
         return values
 
     def _reflectance_slots(self) -> None:
@@ -450,6 +460,7 @@ class SurfaceParams:
             out.hits = tuple(h[index] for h in self.hits)
             out.directions = None if self.directions is None else self.directions[index]
             out.camera = None if self.camera is None else self.camera[index]
+            out.ray = None if self.ray is None else {k: v[index] for k, v in self.ray.items()}
             out._cache = {k: v[index] for k, v in self._cache.items() if k in TEXTURED_SLOTS}
         return out
 

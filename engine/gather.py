@@ -54,6 +54,7 @@ import numpy as np
 
 from . import sampling
 from .bsdf import layer_diffuse_factor, sample_glossy
+from .textures import DIFFUSE_RAY, ray_after_bounce
 
 ROULETTE_WEIGHT = 0.5      # continuations of smaller weight go on by Russian roulette
 
@@ -251,6 +252,9 @@ def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfa
     origins = accel.offset_origins(origin_points, origin_normals, dirs)
     ray_of = np.arange(total_rays)
     throughput = None
+    # The rays' Light Path values (``textures``): a diffuse bounce's, then each mirror,
+    # glossy or glass bounce's (``ray_after_bounce``).
+    path_ray = None
     rays = 0
     t0 = time.perf_counter()
     for bounce in range(max_specular + 1):
@@ -265,13 +269,16 @@ def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfa
         bu, bv = bu[hit], bv[hit]
         if throughput is not None:
             throughput = throughput[hit]
+        if path_ray is not None:
+            path_ray = {k: v[hit] for k, v in path_ray.items()}
         if len(ray_of) == 0:
             break
         x = origins + tt[:, None].astype(np.float64) * dirs
         ng = surfaces.geometric_normals[prim].astype(np.float64)
         facing = np.einsum("ij,ij->i", ng, dirs) > 0
         ng[facing] *= -1                                   # towards the gather ray
-        surface = surfaces.params(prim, bu, bv, dirs)
+        surface = surfaces.params(prim, bu, bv, dirs, ray={
+            **(DIFFUSE_RAY if path_ray is None else path_ray), "Ray Length": tt})
         if bounce > 0 and mirrored_emission and surfaces.materials.has_emission:
             # An emitter seen in a mirror is indirect light at the gather point (its direct
             # light is the emitters it sees straight): counted here, or it was lost.
@@ -306,15 +313,16 @@ def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfa
         idx = np.nonzero(mirror)[0]
         nm = ng[idx]
         incoming = dirs[idx]
-        dirs, weight, _pdf = surface.subset(idx).bsdf(transport=True).mirror.sample(-incoming,
-                                                                                     nm)
+        dirs, weight, pdf = surface.subset(idx).bsdf(transport=True).mirror.sample(-incoming,
+                                                                                    nm)
+        pdf = np.broadcast_to(np.asarray(pdf, np.float64), (len(idx),)).copy()
         if surfaces.materials.has_glossy:
             # Materials with glossy lobes (issue 23): sampled (bsdf.sample_glossy), not
             # mirrored.
             glossy = np.flatnonzero(surface.camera_glossy[idx])
             if len(glossy):
                 per_hit = surface.lobe_inputs
-                g_dirs, g_weight, _pdf = sample_glossy(
+                g_dirs, g_weight, g_pdf = sample_glossy(
                     surfaces.materials, surface.material[idx[glossy]],
                     -incoming[glossy].astype(np.float64), nm[glossy].astype(np.float64), rng,
                     ~facing[idx[glossy]],
@@ -322,6 +330,7 @@ def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfa
                 dirs = dirs.astype(np.float64)
                 weight = weight.astype(np.float64)
                 dirs[glossy], weight[glossy] = g_dirs, g_weight
+                pdf[glossy] = g_pdf
         # Russian roulette on the continuation: it goes on with probability q = the largest
         # channel of its weight / ROULETTE_WEIGHT (at most 1), its weight divided by q. A
         # mirror of rho_s >= 0.5 or glass always goes on; a Principled specular layer (weight
@@ -332,6 +341,10 @@ def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfa
         idx, dirs, nm = idx[go], np.asarray(dirs)[go], nm[go]
         if len(idx) == 0:
             break
+        if surfaces.materials.reads_light_path:
+            path_ray = ray_after_bounce(
+                DIFFUSE_RAY if path_ray is None else {k: v[idx] for k, v in path_ray.items()},
+                dirs, incoming[go], nm, np.isinf(pdf[go]))
         origins = accel.offset_origins(x[idx], nm, dirs)
         throughput = weight if throughput is None else throughput[idx] * weight
         ray_of = ray_of[idx]

@@ -84,6 +84,7 @@ from .direct import direct_terms, irradiance_from_terms
 from .passes import DIFFUSE, GLOSSY, LIGHT_PASS_NAMES, TRANSMISSION, LightSums
 from .lights import ray_visible, seen_light_radiance
 from .settings import RenderSettings, camera_blocks
+from .textures import STRAIGHT_ON, ray_after_bounce
 
 # What each camera batch counts (rays, seconds of threads, look-ups); summed over batches.
 BATCH_COUNTERS = ("camera_rays", "shadow_rays", "specular_rays", "glossy_rays", "paths_cut",
@@ -97,9 +98,9 @@ MAX_HISTOGRAM_MATERIALS = 64
 EDGE_SAMPLES_FACTOR = 16    # an emitter edge's pixel: this x samples for its emission
 # Extra texture look-ups per primary sample on a textured material (``supersample_textures``).
 TEXTURE_SUPERSAMPLES = 7
-# A bounce whose new direction has this cosine or more with the old one went on straight
-# (a transparent surface): the ray stays a camera ray (``scene.World.camera``).
-STRAIGHT_ON = 1.0 - 1e-5
+# ``STRAIGHT_ON`` (``textures``): a bounce whose new direction has this cosine or more with
+# the old one went on straight (a transparent surface): the ray stays a camera ray
+# (``scene.World.camera``) and keeps its Light Path values (``textures.ray_after_bounce``).
 # Camera-path vertices below this depth split smooth glass into a reflected and a refracted
 # ray (``_GlossyHits.sample``); deeper ones pick one by its Fresnel share, as Cycles does.
 GLASS_SPLIT_DEPTH = 2
@@ -371,6 +372,9 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
     # camera flag.
     track_camera = scene.world.camera is not None or materials.reads_light_path
     camera_rays = cam = None
+    # Where a material's nodes read Light Path, each ray after the first hit carries the
+    # other outputs' values too (``textures.ray_after_bounce``: Cycles' flags and depths).
+    path_ray = path_values = None
     # Per ray after the first bounce, with the light passes: its path's first-bounce kind.
     path_kind = kinds = None
     if photon is not None and photon.lookups < spp:
@@ -441,6 +445,7 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
             thr = None if throughput is None else throughput[hit]
             probing = None if probes is None else probes[hit]
             cam = None if camera_rays is None else camera_rays[hit]
+            path_values = None if path_ray is None else {k: v[hit] for k, v in path_ray.items()}
             kinds = None if path_kind is None else path_kind[hit]
             if mis_pdf is not None:
                 mis_pdf, mis_x, mis_n = mis_pdf[hit], mis_x[hit], mis_n[hit]
@@ -449,6 +454,7 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
             t_hit, d, o, rays, thr = _t, directions, origins, ray_of, throughput
             probing = probes
             cam = camera_rays
+            path_values = path_ray
             kinds = path_kind
         # Samples in order (primary rays, all hit): pixel sums need no index.
         in_order = depth == 0 and all_hit
@@ -456,7 +462,9 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
         x = sampling.scale_rows(d, t_hit)
         x += o
         ng, ns, front = surfaces.normals(prim, bu, bv, d)
-        surface = surfaces.params(prim, bu, bv, d, True if depth == 0 else cam)
+        surface = surfaces.params(prim, bu, bv, d, True if depth == 0 else cam,
+                                  ray=None if not materials.reads_light_path else
+                                  {**(path_values or {}), "Ray Length": t_hit})
         if depth == 0 and not materials.constant_per_material:
             t0 = time.perf_counter()
             supersample_textures(context, camera, batch, surface, prim, rays, spp, stats)
@@ -632,6 +640,10 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
         if track_camera:
             was = np.ones(len(idx), bool) if depth == 0 else cam[idx]
             camera_rays = was & (sampling.dot_rows(directions, d[idx]) > STRAIGHT_ON)
+        if materials.reads_light_path:
+            path_ray = ray_after_bounce(
+                None if path_values is None else {k: v[idx] for k, v in path_values.items()},
+                directions, d[idx], ns[idx], np.isinf(mis_pdf))
         if light is not None:
             # Each path's first bounce's kind (the passes its later light goes to): through
             # the surface (glass refracting) Transmission, else (mirror, glossy lobes, glass
@@ -728,7 +740,8 @@ def _seen_emission(scene, accel, surfaces, origins, directions, tmax, split=Fals
         p = prim[hit]
         front = sampling.dot_rows(np.take(surfaces.geometric_normals, p, axis=0),
                                   directions[hit]) < 0
-        surface = surfaces.params(p, bu[hit], bv[hit], directions[hit], camera=True)
+        surface = surfaces.params(p, bu[hit], bv[hit], directions[hit], camera=True,
+                                  ray={"Ray Length": _t[hit]})
         out[hit] = surface.emitted_radiance * (front | surface.both_sides)[:, None]
     if split:
         return out, np.where(hit[:, None], 0.0, out)
@@ -763,7 +776,7 @@ def supersample_textures(context: CameraContext, camera, batch: int, surface, pr
     counts = np.ones(len(textured))
     if same.any():
         extra = context.surfaces.params(p2[same], u2[same], v2[same], directions[same],
-                                        camera=True).diffuse
+                                        camera=True, ray={"Ray Length": _t[same]}).diffuse
         slot = np.searchsorted(textured, owner[same])
         np.add.at(total, slot, extra)
         counts += np.bincount(slot, minlength=len(textured))

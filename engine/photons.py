@@ -69,6 +69,7 @@ from .npzjson import pack_json, unpack_json
 from .scene import MAX_COORDINATE, MAX_VALUE, AreaLight, PointLight, Scene, SpotLight, SunLight
 from .bsdf import MaterialTable, sample_glossy
 from .surfaces import SceneSurfaces
+from .textures import DIFFUSE_RAY
 
 EXTERIOR_SHARE = 0.25     # with portals: the world's photons from its disc, outside them
 
@@ -698,7 +699,7 @@ def trace_photons(scene: Scene, accel, emitted: EmittedPhotons, rng: np.random.G
         flip = sampling.dot_rows(n, d) > 0                 # turn n towards the photon
         if flip.any():
             n[flip] *= -1
-        surface = surfaces.params(prim, bu, bv, d)
+        surface = surfaces.params(prim, bu, bv, d, ray={**DIFFUSE_RAY, "Ray Length": t})
         if caustic:
             # Caustic paths: the first hit must be specular; diffuse stores need a specular
             # bounce before them.

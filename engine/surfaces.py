@@ -38,11 +38,13 @@ class SceneSurfaces:
                 self.shading_normals = None
 
     def params(self, prim: np.ndarray, bu=None, bv=None, directions=None,
-               camera=None) -> SurfaceParams:
+               camera=None, ray=None) -> SurfaceParams:
         """Material parameters at hits on triangles ``prim`` with barycentrics (bu, bv) of
         rays along ``directions`` (for inputs that read the view), ``camera`` (N,) bool where
-        they are camera rays' (Light Path's Is Camera Ray; ``MaterialTable.at``)."""
-        return self.materials.at(self.material_ids[prim], prim, bu, bv, directions, camera)
+        they are camera rays' (Light Path's Is Camera Ray), ``ray`` the rays' other Light
+        Path values (``MaterialTable.at``)."""
+        return self.materials.at(self.material_ids[prim], prim, bu, bv, directions, camera,
+                                 ray)
 
     def normals(self, prim, bu, bv, d):
         """(ng, ns, front) at hits of rays ``d`` (module docstring)."""

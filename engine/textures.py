@@ -60,8 +60,16 @@ whose node-driven inputs read a Light Path node (``light_path``) are evaluated w
 ``CAMERA_FLAG`` in their hit values: 1 where the caller says the hit is a camera ray's
 (``bsdf.SurfaceParams(camera=...)``), 0 elsewhere; a mixed weight's mean is the larger of its
 means for the two kinds of ray (so that the lobe exists for both and the per-hit ratio picks
-it), the other inputs' means are a lighting ray's. Light Path's other outputs keep a camera
-ray's values (export names them).
+it), the other inputs' means are a lighting ray's. Light Path's other outputs follow the ray
+(``"ray:<output>"`` hit values, ``bsdf.SurfaceParams(ray=...)``): a camera ray's first hit
+reads 0 in all of them; the camera path's reflections and refractions read Cycles' flags and
+depths for the bounces they took (``ray_after_bounce``); gather rays and cache records'
+rays read a diffuse bounce's (``DIFFUSE_RAY``: Is Diffuse Ray, Is Reflection Ray, Ray Depth
+and Diffuse Depth 1), and after a mirror, glossy or glass surface that bounce's too;
+photons read a diffuse bounce's at every hit (a photon does not know the path that will
+see it); light samples of emitters read 0. Ray Length is each segment's length. A mixed weight's
+mean is the largest over a lighting ray, a camera ray and one of each kind of camera-path
+ray.
 
 Conversions follow Cycles: a colour feeding a number by its luminance (``nodes.LUMA``), a
 vector by the mean of its components, a number feeding a colour on all three channels.
@@ -78,7 +86,8 @@ from .shaders import CLOSURE_KINDS, seed_reduction
 
 __all__ = ["MaterialTextures", "HitInputs", "approximations", "interpolate_corners",
            "WEIGHT", "COMPLEMENT", "WEIGHT_EXACT_KINDS", "default_weight", "weight_at",
-           "lookups_per_hit", "EMISSION_PARAMS", "MEAN_SAMPLES", "CAMERA_FLAG",
+           "lookups_per_hit", "EMISSION_PARAMS", "MEAN_SAMPLES", "CAMERA_FLAG", "DIFFUSE_RAY",
+           "RAY_FLAGS", "RAY_DEPTHS", "STRAIGHT_ON", "ray_after_bounce",
            "PARAM_RANGES", "EXACT_PARAMS", "PER_TRIANGLE"]
 
 # Area-uniform points per textured material for the means the lobes use.
@@ -131,6 +140,58 @@ VIEW_NODES = ("ShaderNodeFresnel", "ShaderNodeLayerWeight", "ShaderNodeNewGeomet
 # The hit value that tells a camera ray's hit (1) from any other ray's (0) to Light Path's Is
 # Camera Ray (``nodes`` module docstring: ``"ray:<output>"``).
 CAMERA_FLAG = "ray:Is Camera Ray"
+# The Light Path values of a ray leaving a diffuse camera hit (Cycles' path flags after one
+# diffuse reflection): what gather rays, cache records' rays and photons read, and the
+# means of a material for lighting (``MaterialTextures._means``).
+DIFFUSE_RAY = {"Is Diffuse Ray": 1.0, "Is Reflection Ray": 1.0, "Ray Depth": 1.0,
+               "Diffuse Depth": 1.0}
+# The other rays a camera path sends (``ray_after_bounce``), one of each kind, for the means:
+# a glossy and a sharp reflection, a refraction.
+_PATH_RAYS = (
+    {"Is Glossy Ray": 1.0, "Is Reflection Ray": 1.0, "Ray Depth": 1.0, "Glossy Depth": 1.0},
+    {"Is Glossy Ray": 1.0, "Is Singular Ray": 1.0, "Is Reflection Ray": 1.0, "Ray Depth": 1.0,
+     "Glossy Depth": 1.0},
+    {"Is Glossy Ray": 1.0, "Is Singular Ray": 1.0, "Is Transmission Ray": 1.0,
+     "Ray Depth": 1.0, "Transmission Depth": 1.0})
+
+# Light Path's flags and depths that a bounce changes (``ray_after_bounce``).
+RAY_FLAGS = ("Is Diffuse Ray", "Is Glossy Ray", "Is Singular Ray", "Is Reflection Ray",
+             "Is Transmission Ray")
+RAY_DEPTHS = ("Ray Depth", "Diffuse Depth", "Glossy Depth", "Transmission Depth",
+              "Transparent Depth")
+# A bounce whose new direction has this cosine or more with the old one went on straight: a
+# transparent surface, which changes no flag (Transparent Depth + 1).
+STRAIGHT_ON = 1.0 - 1e-5
+
+
+def ray_after_bounce(previous, directions, incoming, normals, singular) -> dict:
+    """{Light Path output: (N,)} of N rays sent on by a glossy, mirror, glass or transparent
+    surface, as Cycles' path state has them after that bounce: ``previous`` the values of
+    the rays that arrived (``RAY_FLAGS`` and ``RAY_DEPTHS``; None or a missing one: 0, a
+    camera ray's), ``directions`` / ``incoming`` (N, 3) the new and the arriving rays,
+    ``normals`` (N, 3) the surfaces', ``singular`` (N,) bool where a delta lobe (mirror,
+    smooth glass) sent the ray. A ray gone straight on (``STRAIGHT_ON``) keeps what it had,
+    Transparent Depth + 1; any other is a glossy ray (Is Glossy Ray 1, Is Diffuse Ray 0, Is
+    Singular Ray for a delta lobe), a reflection (Glossy Depth + 1) or a transmission
+    (Transmission Depth + 1), Ray Depth + 1."""
+    n = len(directions)
+    before = {k: (np.zeros(n) if previous is None or k not in previous else
+                  np.broadcast_to(np.asarray(previous[k], np.float64), (n,)))
+              for k in RAY_FLAGS + RAY_DEPTHS}
+    straight = np.einsum("ij,ij->i", directions, incoming) > STRAIGHT_ON
+    through = np.einsum("ij,ij->i", directions, normals) < 0
+    out = {"Is Diffuse Ray": np.zeros(n), "Is Glossy Ray": np.ones(n),
+           "Is Singular Ray": np.asarray(singular, np.float64),
+           "Is Reflection Ray": (~through).astype(np.float64),
+           "Is Transmission Ray": through.astype(np.float64),
+           "Ray Depth": before["Ray Depth"] + 1.0,
+           "Diffuse Depth": before["Diffuse Depth"],
+           "Glossy Depth": before["Glossy Depth"] + ~through,
+           "Transmission Depth": before["Transmission Depth"] + through,
+           "Transparent Depth": before["Transparent Depth"] + straight}
+    return {k: (v if k == "Transparent Depth" else np.where(straight, before[k], v))
+            for k, v in out.items()}
+
 
 # Closure kinds whose lobes take a node-driven Roughness per hit (``bsdf.LobeInputs``).
 LOBE_ROUGHNESS = ("glossy", "metallic", "glass", "refraction", "principled")
@@ -526,12 +587,18 @@ class MaterialTextures:
         v = rng.random(MEAN_SAMPLES)
         bu, bv = su * (1.0 - v), su * v            # area-uniform barycentrics
         prim = tris[pick]
-        closures = self.closures_at(material_id, prim, bu, bv)
-        seen = None
+        lighting = None
         if self.light_path[material_id]:
-            # What camera rays meet: a closure mixed in for them alone gets its lobe too.
-            seen = self.closures_at(material_id, prim, bu, bv,
-                                    hit_values={CAMERA_FLAG: np.ones(len(prim))})
+            lighting = {f"ray:{k}": np.full(len(prim), v) for k, v in DIFFUSE_RAY.items()}
+        closures = self.closures_at(material_id, prim, bu, bv, hit_values=lighting)
+        seen = []
+        if self.light_path[material_id]:
+            # What camera rays and the rays of camera paths meet: a closure mixed in for them
+            # alone gets its lobe too.
+            seen = [self.closures_at(material_id, prim, bu, bv, hit_values=values)
+                    for values in [{CAMERA_FLAG: np.ones(len(prim))}] + [
+                        {f"ray:{k}": np.full(len(prim), v) for k, v in ray.items()}
+                        for ray in _PATH_RAYS]]
         means = []
         for c, original in zip(closures, material.closures):
             if not original.textures:
@@ -547,9 +614,9 @@ class MaterialTextures:
             mean = original.scaled(1.0)
             if WEIGHT in original.textures:        # the mixed weight's mean over the surface
                 mean.weight = np.mean(np.broadcast_to(c.weight, (len(prim), 3)), axis=0)
-                if seen is not None:
+                for other in seen:
                     mean.weight = np.maximum(mean.weight, np.mean(np.broadcast_to(
-                        seen[len(means)].weight, (len(prim), 3)), axis=0))
+                        other[len(means)].weight, (len(prim), 3)), axis=0))
             mean.params = {k: (np.asarray(v, np.float64) if isinstance(v, tuple) else v)
                            for k, v in params.items()}
             means.append(mean)

@@ -38,9 +38,9 @@ animation already applied by Blender) and turns it into the renderer's inert sce
     normal-incidence Fresnel reflectance ((n-1)^2 + k^2) / ((n+1)^2 + k^2) per channel.
   - Mix Shader: (1 - Fac) A + Fac B; Add Shader: A + B. A Fac driven by nodes the evaluator
     supports becomes a per-hit factor on the weights below it (``textures.WEIGHT``); Light
-    Path Is Camera Ray among them tells camera rays from the rest (``textures.CAMERA_FLAG``:
-    an emitter the camera sees through), its other outputs read a camera ray's values, with
-    a warning.
+    Path among them reads each ray's values (``textures`` module docstring: Is Camera Ray
+    for camera rays, the flags and depths of the camera path's reflections and refractions,
+    a diffuse bounce's for gather rays and photons); Is Shadow Ray reads 0, with a warning.
   - Glass / Refraction: only the reflected Fresnel part at normal incidence, as a mirror.
   - Translucent, Subsurface, Sheen, Toon, hair and other shaders with a colour: treated as a
     diffuse of that colour. Transparent and Holdout: black. Anything else: default grey.
@@ -1070,12 +1070,10 @@ def material_from_nodes(mat, warn=None, images: dict | None = None,
              f"rendered black")
         return Material(name, diffuse=np.zeros(3))
     closures = reader.closures(src)
-    others = sorted(light_path_outputs(tree) - {"Is Camera Ray"})
-    if others:
-        warn(f"{reader.owner}: Light Path {', '.join(others)} "
-             f"{'is' if len(others) == 1 else 'are'} read as a camera ray's (0, depths 0) at "
-             "every hit; only Is Camera Ray tells rays apart (camera rays from photons, "
-             "gather rays, light samples and reflections)")
+    if "Is Shadow Ray" in light_path_outputs(tree):
+        warn(f"{reader.owner}: Light Path Is Shadow Ray reads 0 at every hit: Lanterna's "
+             "shadow rays stop at every surface and read no material (light through "
+             "transparent and glass surfaces comes from photons)")
     # Driven inputs no closure parameter took (a Mix Shader's Fac ...): their defaults.
     for (node_name, _names), (_socket, value, socket_name) in reader.driven.items():
         warn(f"{reader.owner}: {socket_name} of '{node_name}' is driven by nodes; Lanterna "
