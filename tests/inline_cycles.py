@@ -98,12 +98,19 @@ def lanterna_image(bpy, seed: int, samples: int | None = None):
     return exported, image
 
 
-def cycles_image(bpy, scene, tmp_path, samples: int, adaptive: bool = True) -> np.ndarray:
+def cycles_image(bpy, scene, tmp_path, samples: int, adaptive: bool = True,
+                 unbiased: bool = False) -> np.ndarray:
     """Cycles' render of ``scene`` at ``samples`` spp, no denoising (``adaptive`` False: no
-    adaptive sampling either), (H, W, 3) float64 with row 0 at the top."""
+    adaptive sampling either), (H, W, 3) float64 with row 0 at the top. ``unbiased``: as the
+    stored references (``tests/data``): Filter Glossy 0 and no clamping (Cycles' defaults,
+    Filter Glossy 1 and indirect clamp 10, take light off caustic paths: a mirror wall's
+    light on the floor 1-11 % under)."""
     scene.render.engine = "CYCLES"
     scene.cycles.samples = samples
     scene.cycles.use_denoising = False
+    if unbiased:
+        scene.cycles.blur_glossy = 0.0
+        scene.cycles.sample_clamp_direct = scene.cycles.sample_clamp_indirect = 0.0
     if not adaptive:
         scene.cycles.use_adaptive_sampling = False
     scene.render.image_settings.file_format = "OPEN_EXR"
