@@ -190,6 +190,7 @@ CORNELL_MM_EMITTER_MAX_SE = 0.005    # regions that hold an emitter: SE of the 4
 CORNELL_MM_MAX_NOISE = 0.005     # pooled SE of the 4-seed means: 2 % is >= 4 sigma
 
 
+@pytest.mark.parity      # four whole renders against Cycles (40 s): make test-parity
 def test_original_cornell_box_every_region_within_2_percent():
     """The original Cornell box (``tests/parity_scenes.py:build_cornell_original``: the data
     page's geometry in millimetres, its light quad an Emission mesh of strength 50 0.1 mm under
