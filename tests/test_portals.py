@@ -135,8 +135,11 @@ UP = np.array([0.0, 0.0, 1.0])
                                   ([0.0, 1.99, 1.0], [0, -1, 0]),     # north wall, head-on
                                   ([0.0, -2.5, 1.0], [0, 1, 0])])     # outside: no portal
 def test_light_density_integrates_to_one(x, n):
+    """The light-sampling density over the sphere by midpoint quadrature on 512 x 1024
+    equal-area cells: measured 1 - 1.5e-3, 1 - 6.5e-4, 1 + 7.8e-4, 1 + 9e-5 at the four
+    points (the portal's edges cut cells; 1024 x 2048 cells: within 3.4e-4, 9x the time)."""
     light = EnvironmentLight(_image_world())
-    d, d_omega = _sphere_directions()
+    d, d_omega = _sphere_directions(512, 1024)
     x = np.tile(np.asarray(x, float), (len(d), 1))
     n = np.tile(np.asarray(n, float), (len(d), 1))
     total = float(light.solid_angle_pdf(x, n, d).sum() * d_omega)
