@@ -71,7 +71,7 @@ test: $(STAMP)
 
 # The whole-render comparisons with Cycles, seed scenes and inline ones (about 5 minutes); CI runs them.
 test-parity: $(STAMP)
-	$(PY) -m pytest -q -m parity
+	$(PY) -m pytest -q -m parity --durations=15
 
 # One installable zip per platform in dist/, built and validated by Blender's blender_ext.py.
 extension: $(STAMP)
