@@ -31,7 +31,7 @@ def bakes():
     return data, images, bake_inputs(data)
 
 
-def bake_inputs(data) -> dict:
+def bake_inputs(data, image_axes: bool = False) -> dict:
     """The per-hit inputs at the baked texels (engine/nodes.py's docstring names them): the
     coordinates and Geometry outputs Cycles baked; the attributes from their linear
     definitions at the baked object position; the plane's tangent and its (identity) normal
@@ -41,7 +41,9 @@ def bake_inputs(data) -> dict:
     packed to one width, their mean length (``differential_make_compact``), and unpacked
     along the two orthonormal tangents of the true normal (``differential_from_compact``,
     ``make_orthonormals``), not along the image's axes; each coordinate's differential is
-    its change along those tangents (exact: every coordinate is linear over the plane)."""
+    its change along those tangents (exact: every coordinate is linear over the plane).
+    ``image_axes``: one texel along the image's x and y instead (the guard test's wrong
+    footprint)."""
     s = int(data["size"])
     grid = {"uv": data["coord/UV"][..., :2], "position": data["coord/Object"],
             "generated": data["coord/Generated"], "normal": data["coord/Normal"]}
@@ -54,12 +56,16 @@ def bake_inputs(data) -> dict:
     px, py = texel["position_world"]
     width = 0.5 * (np.linalg.norm(px, axis=1) + np.linalg.norm(py, axis=1))
     e1, e2 = _cycles_orthonormals(inputs["true_normal_world"])
+    if image_axes:
+        e1, e2 = (v / np.linalg.norm(v, axis=1, keepdims=True) for v in (px, py))
+        width = None
     # Each tangent as a combination (a, b) of the texel steps px, py (least squares in-plane).
     gram = np.stack([np.einsum("ij,ij->i", px, px), np.einsum("ij,ij->i", px, py),
                      np.einsum("ij,ij->i", px, py), np.einsum("ij,ij->i", py, py)],
                     axis=1).reshape(-1, 2, 2)
     for axis, tangent in (("x", e1), ("y", e2)):
-        d = tangent * width[:, None]
+        d = tangent * (width[:, None] if width is not None else
+                       np.linalg.norm(px if axis == "x" else py, axis=1, keepdims=True))
         rhs = np.stack([np.einsum("ij,ij->i", d, px), np.einsum("ij,ij->i", d, py)], axis=1)
         ab = np.linalg.solve(gram, rhs[..., None])[..., 0]
         for k, (gx, gy) in texel.items():
@@ -159,18 +165,8 @@ def test_bump_cases_catch_a_footprint_along_the_image_axes(bakes):
     the image's x and y (the true pixel directions, which the compact differential drops)
     instead of along the normal's orthonormal tangents must break them (it left 2.7e-4 to
     2.8e-2 of error, against 1.3e-6 to 5.6e-6 with Cycles' frame)."""
-    data, images, inputs = bakes
-    s = int(data["size"])
-    moved = dict(inputs)
-    for k in ("uv", "position", "generated", "position_world"):
-        key = {"uv": "UV", "position": "Object", "generated": "Generated",
-               "position_world": "Geometry/Position"}[k]
-        grid = data[f"coord/{key}"].astype(float)
-        if k == "uv":
-            grid = grid[..., :2]
-        moved[f"dx:{k}"] = np.gradient(grid, axis=1).reshape(s * s, -1)
-        moved[f"dy:{k}"] = np.gradient(grid, axis=0).reshape(s * s, -1)
-    moved["dPdx"], moved["dPdy"] = moved["dx:position_world"], moved["dy:position_world"]
+    data, images, _inputs = bakes
+    moved = bake_inputs(data, image_axes=True)
     for name in ("bump_math", "bump_math_filter_width", "bump_noise",
                  "bump_noise_invert_strength"):
         err, bound = _compare(data, images, moved, name)
