@@ -69,7 +69,7 @@ render: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest -q -m "not parity"
 
-# The whole-render comparisons with Cycles, seed scenes and inline ones (about 5 minutes); CI runs them.
+# The whole-render comparisons with Cycles, seed scenes and inline ones (about 9 minutes); CI runs them.
 test-parity: $(STAMP)
 	$(PY) -m pytest -q -m parity --durations=15
 

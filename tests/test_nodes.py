@@ -54,18 +54,16 @@ def bake_inputs(data, image_axes: bool = False) -> dict:
     texel = {k: [np.gradient(grid[k].astype(float), axis=a).reshape(s * s, -1) for a in (1, 0)]
              for k in ("uv", "position", "generated", "position_world")}
     px, py = texel["position_world"]
-    width = 0.5 * (np.linalg.norm(px, axis=1) + np.linalg.norm(py, axis=1))
-    e1, e2 = _cycles_orthonormals(inputs["true_normal_world"])
     if image_axes:
-        e1, e2 = (v / np.linalg.norm(v, axis=1, keepdims=True) for v in (px, py))
-        width = None
-    # Each tangent as a combination (a, b) of the texel steps px, py (least squares in-plane).
+        steps = (px, py)
+    else:
+        width = 0.5 * (np.linalg.norm(px, axis=1) + np.linalg.norm(py, axis=1))[:, None]
+        steps = tuple(t * width for t in _cycles_orthonormals(inputs["true_normal_world"]))
+    # Each step as a combination (a, b) of the texel steps px, py (least squares in-plane).
     gram = np.stack([np.einsum("ij,ij->i", px, px), np.einsum("ij,ij->i", px, py),
                      np.einsum("ij,ij->i", px, py), np.einsum("ij,ij->i", py, py)],
                     axis=1).reshape(-1, 2, 2)
-    for axis, tangent in (("x", e1), ("y", e2)):
-        d = tangent * (width[:, None] if width is not None else
-                       np.linalg.norm(px if axis == "x" else py, axis=1, keepdims=True))
+    for axis, d in zip("xy", steps):
         rhs = np.stack([np.einsum("ij,ij->i", d, px), np.einsum("ij,ij->i", d, py)], axis=1)
         ab = np.linalg.solve(gram, rhs[..., None])[..., 0]
         for k, (gx, gy) in texel.items():
