@@ -128,6 +128,12 @@ def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.
         choice = choice.reshape(-1)
         u2 = u2.reshape(-1, 2)
         p_sel = probs[point_of, choice]
+        # What is left of each sample's choice number inside its light's interval, uniform
+        # in [0, 1) and stratified over the point's samples of that light: an image world
+        # picks its strategy and cell with it (``EnvironmentLight.sample_rgb``).
+        u_pick = u_pick.reshape(-1)
+        below = np.where(choice > 0, cdf[point_of, np.maximum(choice - 1, 0)], 0.0)
+        rest = np.clip((u_pick - below) / np.maximum(p_sel, 1e-300), 0.0, 1.0 - 1e-12)
         for li, light in enumerate(lights.sampled):
             sel = np.nonzero(choice == li)[0]
             if len(sel) == 0:
@@ -135,7 +141,7 @@ def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.
             pts = point_of[sel]
             if getattr(light, "per_sample_rgb", False):
                 # An image world: each sample has its own radiance (lights.EnvironmentLight).
-                w, dist, weight, rgb = light.sample_rgb(x[pts], n[pts], u2[sel])
+                w, dist, weight, rgb = light.sample_rgb(x[pts], n[pts], u2[sel], rest[sel])
             else:
                 (w, dist, weight), rgb = light.sample(x[pts], n[pts], u2[sel]), None
             weight = weight / (p_sel[sel] * k)

@@ -958,13 +958,20 @@ class EnvironmentLight:
         portal, cdf, cos = self._shares(x, faces)
         return portal * self.portals.pdf(x, w, sel) + cdf * env_pdf + cos * cos_pdf
 
-    def sample_rgb(self, x, n, u):
-        """Directions, shadow distances (inf), scalar weights cos / p and radiance (N, 3)."""
+    def sample_rgb(self, x, n, u, pick=None):
+        """Directions, shadow distances (inf), scalar weights cos / p and radiance (N, 3).
+        ``pick`` (N,): numbers stratified over a point's samples (``direct.direct_terms``
+        passes the remainder of its light choice) that choose the strategy and, for the
+        CDF's samples, the image cell from the cells sorted by brightness
+        (``Environment.sample(u, u_cell)``); ``u`` (N, 2) then places the sample inside its
+        cell, on its portal or about the normal. Without ``pick``, ``u[:, 0]`` chooses the
+        strategy and is reused, rescaled, with ``u[:, 1]`` (the densities are the same)."""
         count = len(x)
         x = np.asarray(x, np.float64)
         n64 = np.asarray(n, np.float64)
         w = np.empty((count, 3))
-        pick = u[:, 0].copy()
+        stratified = pick is not None
+        pick = np.asarray(u[:, 0] if pick is None else pick, np.float64).copy()
         sel, faces = self._portal_weights(x)
         p_share, c_share, _ = self._shares(x, faces)
         portal = faces & (pick < p_share)
@@ -983,19 +990,28 @@ class EnvironmentLight:
             rows = np.arange(len(idx))
             lower = np.where(k > 0, cdf[rows, np.maximum(k - 1, 0)], 0.0)
             share = sel[idx, k]
-            u0 = np.clip((pick[idx] - lower) / np.where(share > 0, share, 1.0), 0.0, 1.0 - 1e-12)
+            u0 = u[idx, 0] if stratified else np.clip(
+                (pick[idx] - lower) / np.where(share > 0, share, 1.0), 0.0, 1.0 - 1e-12)
             p = self.portals.sample_points(k, np.stack([u0, u[idx, 1]], 1))
             d = p - x[idx]
             w[idx] = d / np.maximum(np.linalg.norm(d, axis=1), 1e-300)[:, None]
         if env.any():
             idx = np.flatnonzero(env)
-            uu = np.stack([pick[idx] / split[idx], u[idx, 1]], 1)
-            w[idx] = self.environment.sample(np.clip(uu, 0.0, 1.0 - 1e-12))[0]
+            if stratified:
+                w[idx] = self.environment.sample(
+                    np.clip(u[idx], 0.0, 1.0 - 1e-12),
+                    u_cell=np.clip(pick[idx] / split[idx], 0.0, 1.0 - 1e-12))[0]
+            else:
+                uu = np.stack([pick[idx] / split[idx], u[idx, 1]], 1)
+                w[idx] = self.environment.sample(np.clip(uu, 0.0, 1.0 - 1e-12))[0]
         if cos.any():
             idx = np.flatnonzero(cos)
-            lo = split[idx]
-            uu = np.stack([np.clip((pick[idx] - lo) / np.maximum(1.0 - lo, 1e-300), 0.0,
-                                   1.0 - 1e-12), u[idx, 1]], 1)
+            if stratified:
+                uu = u[idx]
+            else:
+                lo = split[idx]
+                uu = np.stack([np.clip((pick[idx] - lo) / np.maximum(1.0 - lo, 1e-300), 0.0,
+                                       1.0 - 1e-12), u[idx, 1]], 1)
             t, b = sampling.orthonormal_basis(n64[idx])
             w[idx] = sampling.to_world(sampling.square_to_cosine_hemisphere(uu), t, b, n64[idx])
         pdf = self.solid_angle_pdf(x, n64, w)

@@ -20,7 +20,8 @@ formula for the constant world.
   the walls) agrees with it within the two estimates' errors;
 * photons entering through the portal (black walls, a grey floor: the map holds direct light
   only) give the floor the reference's irradiance: the mean ratio over 6 points within 4
-  standard errors of its spread, each point within 8 %.
+  standard errors of its spread, each point within 15 % (4 Poisson SD + the kernel's
+  measured bias at the sun patch's edge).
 
 Checked to fail (each by editing ``engine/lights.py`` or ``engine/photons.py``, running this
 file, then restoring it): the portal density's r^2 replaced by r (``PortalSet.pdf``): the
@@ -220,10 +221,14 @@ def test_photons_through_the_portal_light_the_floor():
     world = _image_world()
     scene = _room(world)
     accel = Accelerator(scene.triangles)
-    pm = build_photon_map(scene, accel, 400_000, seed=2)
-    e = pm.irradiance(FLOOR_POINTS, np.tile(UP, (len(FLOOR_POINTS), 1)), k=400, max_radius=0.5)
+    pm = build_photon_map(scene, accel, 1_600_000, seed=2)
+    e = pm.irradiance(FLOOR_POINTS, np.tile(UP, (len(FLOOR_POINTS), 1)), k=1600, max_radius=0.5)
     expected = np.array([_window_irradiance(p, UP, world) for p in FLOOR_POINTS])
     ratio = (e @ [0.2126, 0.7152, 0.0722]) / (expected @ [0.2126, 0.7152, 0.0722])
     se = ratio.std(ddof=1) / np.sqrt(len(ratio))
     assert abs(ratio.mean() - 1) < 4 * se, (ratio, se)
-    assert np.all(np.abs(ratio - 1) < 0.08), ratio
+    # Each point: k = 1600 photons give it a Poisson SD of 1 / 40 = 2.5 % (measured 0.2-4 %
+    # over seeds 2-4), and the kernel's blur of the sun patch's edge biases the second point
+    # by +5.2-5.4 % (at this radius, whichever sampler emits the photons): 4 SD + 5.4 %.
+    # (It was 8 % at 400k photons and k = 400, SD 5-7.5 %: seeds 4 and 5 failed it.)
+    assert np.all(np.abs(ratio - 1) < 0.15), ratio
