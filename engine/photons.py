@@ -250,7 +250,14 @@ def emit_photons(scene: Scene, count: int, rng: np.random.Generator,
     for i, (_, _, spec) in enumerate(lights):
         if spec[0] == "world" and spec[3] is not None:     # photons outside the portals
             lum[i] = spec[4] * EXTERIOR_SHARE / (1.0 - EXTERIOR_SHARE)
-    share = np.maximum(np.floor(count * lum / lum.sum()).astype(int), 1)
+    # Largest remainders (Hamilton): the floors, then one more each for the largest fractions
+    # until the counts add up to ``count`` (a light alone gets all of them, not 999 of 1000
+    # where count x lum / lum rounds to 999.99999); at least one each.
+    exact = count * lum / lum.sum()
+    share = np.floor(exact).astype(int)
+    left = int(min(max(count - share.sum(), 0), len(share)))
+    share[np.argsort(share - exact, kind="stable")[:left]] += 1
+    share = np.maximum(share, 1)
     origins, directions, powers, per_light = [], [], [], {}
     centers, r2s = [], []
     for (name, flux, spec), n in zip(lights, share):
