@@ -14,6 +14,8 @@ extension zips leave this folder out, and ``lanterna bench`` finds it only in a 
                              error on the material scenes (issue 23)
     ``texture_cost.py``      ``--textures``: what texture evaluation adds to the textured
                              room's ``final`` against its textures' means (issue 24)
+    ``floor_sharpness.py``   ``--sharpness``: the textured room's floor against a plain one,
+                             blur or noise (issue 24)
     ``cache_index.py``       ``--cache-index``: the irradiance cache's grid against its kd-tree
     ``validation.py``        ``--validation``: writes docs/validation.md
     ``performance.py``       ``--performance``: writes docs/performance.md (runs the sweep)

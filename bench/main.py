@@ -31,6 +31,7 @@ Parameters
     cost estimate, then check it on the seed scenes) and ``--check-estimate`` (the check
     alone) hand over to ``bench/calibrate.py``, ``--sweep`` to ``bench/sweep.py``,
     ``--materials`` to ``bench/materials.py``, ``--textures`` to ``bench/texture_cost.py``,
+    ``--sharpness`` to ``bench/floor_sharpness.py``,
     ``--vs-cycles`` to ``bench/vs_cycles.py`` and
     ``--cache-index`` to ``bench/cache_index.py``.
 """
@@ -57,6 +58,9 @@ def main(argv=None) -> int:
     if "--textures" in argv:  # issue 24: what textures add to final (textures.py)
         from .texture_cost import main as textures_main
         return textures_main([a for a in argv if a != "--textures"])
+    if "--sharpness" in argv:  # issue 24: the textured floor's noise and blur (floor_sharpness.py)
+        from .floor_sharpness import main as sharpness_main
+        return sharpness_main([a for a in argv if a != "--sharpness"])
     if "--calibrate" in argv or "--check-estimate" in argv:  # issue 6: rates (calibrate.py)
         from .calibrate import main as calibrate_main
         return calibrate_main(argv)
@@ -87,6 +91,10 @@ def main(argv=None) -> int:
                         help="what texture evaluation adds to the textured room's final, "
                              "against the same scene with each texture's mean; see "
                              "bench/texture_cost.py (--textures --help)")
+    parser.add_argument("--sharpness", action="store_true",
+                        help="the textured room's floor against a plain one: per-seed error, "
+                             "the seeds' mean image and per-pixel noise; see "
+                             "bench/floor_sharpness.py (--sharpness --help)")
     parser.add_argument("--calibrate", action="store_true",
                         help="measure this machine's rates for the cost estimate, write them "
                              "and check the estimate on the seed scenes; see "

@@ -25,13 +25,15 @@ from . import sampling
 
 
 def pixel_rays(camera, pixel_start: int, pixel_stop: int, samples: int, rng: np.random.Generator,
-               filter_width: float = 1.5, centres: bool = False, pixels=None):
+               filter_width: float = 1.5, centres: bool = False, pixels=None,
+               positions=None):
     """Rays for window pixels [pixel_start, pixel_stop) in row-major order, top row first.
 
     Returns (origins (P*S, 3) float32, directions (P*S, 3) float32 unit, tmax (P*S,)),
     samples of one pixel contiguous. ``centres``: every sample through the pixel's centre
     (the irradiance cache's placement passes). ``pixels``: these window pixels (row-major
-    indices) instead of the range.
+    indices) instead of the range. ``positions``: (P, S, 2) numbers in [0, 1)^2 to place the
+    samples with (warped by the filter as the stratified ones are) instead of drawing them.
     """
     x0, y0, x1, y1 = camera.border
     win_w, win_h = x1 - x0, y1 - y0
@@ -42,7 +44,10 @@ def pixel_rays(camera, pixel_start: int, pixel_stop: int, samples: int, rng: np.
     py = y0 + (win_h - 1 - row)                     # full-frame row from the bottom
     # Stratified positions: every pixel visits each of its strata once (the order of the
     # strata carries no information, so no per-pixel shuffle is needed).
-    u = sampling.stratified_2d(len(pix), samples, rng, shuffle=False)          # (P, S, 2)
+    if positions is None:
+        u = sampling.stratified_2d(len(pix), samples, rng, shuffle=False)      # (P, S, 2)
+    else:
+        u = np.array(positions, np.float32).reshape(len(pix), samples, 2)     # a copy
     if centres:
         off = np.zeros(u.shape, np.float32)
     else:

@@ -69,6 +69,21 @@ def stratified_2d(groups: int, count: int, rng: np.random.Generator,
     return u
 
 
+def jittered_2d(groups: int, count: int, rng: np.random.Generator) -> np.ndarray:
+    """``count`` points in [0, 1)^2 for each of ``groups`` groups, (groups, count, 2): one in
+    each cell of an a x b grid (a b = count, a the largest divisor of count up to its square
+    root: 8 x 14 for 112), visited in a random order per group, so that any chunk of them is
+    a random subset and all of them together are stratified in two dimensions (a Latin
+    hypercube stratifies each axis alone)."""
+    a = max(d for d in range(1, int(np.sqrt(count)) + 1) if count % d == 0) if count else 1
+    b = count // a if count else 0
+    u = rng.random((groups, count, 2))
+    cells = np.argsort(rng.random((groups, count)), axis=1)
+    u[..., 0] = (cells % b + u[..., 0]) / max(b, 1)
+    u[..., 1] = (cells // b + u[..., 1]) / a
+    return u
+
+
 # Row-wise helpers for (N, 3) vectors. numpy broadcasts over a last axis of 3 slowly (one
 # inner loop per row), so these work on the three columns instead (one loop over N each).
 def dot_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:

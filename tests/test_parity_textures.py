@@ -6,8 +6,9 @@ Cycles references of ``tests/data/make_material_refs.py`` for ``tests/texture_sc
   2 % of Cycles'. Measured, seed 1: worst region 1.91 % (1.45 % before the emitter kept
   its own triangles and lookups went float32, a different realisation of the same
   estimator: seeds 2 and 3 give 1.13 % and 0.99 %, against 1.30 % and 1.42 % before).
-* Sharpness (open, a strict xfail: 3.93 % / 3.51 % textured against 3.50 % / 3.56 % plain at
-  seeds 1 / 2, measured 2026-12-06; what is known of the gap is in the xfail's reason): the
+* Sharpness (open, a strict xfail: 3.86 % / 3.49 % / 3.41 % textured against 3.50 % / 3.56 % /
+  3.48 % plain at seeds 1 / 2 / 3, measured 2026-12-06 by ``lanterna bench --sharpness``;
+  the test renders seed 1; what is known of the gap is in the xfail's reason): the
   floor's per-pixel rel-RMSE against Cycles (``FLOOR_ROWS``: the bottom rows,
   floor only) on the textured room is no worse than on ``plain_room``, whose floor is the
   image's mean colour: the cache and the photon map hold irradiance, and each pixel
@@ -54,13 +55,16 @@ def _floor_rel_rmse(name):
     return float(np.sqrt(np.mean((ours - theirs) ** 2)) / np.sqrt(np.mean(theirs ** 2)))
 
 
-@pytest.mark.xfail(strict=True, reason="issue 24 open: the textured floor's rel-RMSE is 3.93 % "
-                   "/ 3.51 % against the plain floor's 3.50 % / 3.56 % (seeds 1 / 2). Lanterna's own "
-                   "high-frequency noise (seed 1 minus seed 2) is 3.47 % against 2.95 %, all of "
-                   "the excess in Diffuse Direct; it stays (1.87 % against 1.24 %) at 64 light "
-                   "samples, with one albedo per pixel and material, with 63 extra look-ups a "
-                   "sample and with a grey checker; a flat texture through the same code shows "
-                   "none (2.82 %). Its cause is not found")
+@pytest.mark.xfail(strict=True, reason="issue 24 open: the textured floor's rel-RMSE is 3.86 % "
+                   "/ 3.49 % / 3.41 % against the plain floor's 3.50 % / 3.56 % / 3.48 % (seeds "
+                   "1 / 2 / 3). Its detail is as sharp (the 3-seed mean images: 2.42 % against "
+                   "2.48 %); the excess is noise (seed 1 minus seed 2, in this metric: 3.39 % "
+                   "against 3.03 %), nearly all in Diffuse Direct (3.17 % against 2.89 %): the "
+                   "albedo's own anti-aliasing noise adds 0.33 %, the direct irradiance 3.13 % "
+                   "against 2.89 %, of which its per-pixel noise is 4.97 % against 4.84 % under "
+                   "the same brightness weights and the rest the metric's (the bright texels' "
+                   "noise counts more, while the glossy layer's light, alike on every texel, "
+                   "dilutes it less); Diffuse Indirect 0.80 % against 0.60 %, cause not found")
 def test_textured_floor_is_as_sharp_as_a_plain_one():
     textured, plain = _floor_rel_rmse("textured_room"), _floor_rel_rmse("plain_room")
     assert textured <= plain, (textured, plain)

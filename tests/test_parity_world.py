@@ -3,18 +3,21 @@ reference of ``tests/data/make_world_refs.py`` (scenes: ``tests/world_scenes.py`
 region means of luminance, bright regions (over a tenth of the brightest) within the issue's
 bounds: 2 % for the yard, 3 % for the portal interior.
 
-Measured (``final``; worst bright region; the whole image's ratio), reference 4 x 512 spp,
-worst region relative SE 0.028 %:
+Measured 2026-12-06 (``final``, the bilinear-patch HDRI sampler; worst bright region; the
+whole image's ratio), yard reference 4 x 512 spp, worst region relative SE 0.028 %:
 
-===========  =====  ==================  ==================  ==================
-scene        bound  seed 1              seed 2              seed 3
-===========  =====  ==================  ==================  ==================
-yard         2 %    0.75 % (0.9985)     1.20 % (0.9987)     0.71 % (0.9970)
-window_room  3 %    1.63 % (1.0016)     1.68 % (1.0002)     1.90 % (1.0048)
-===========  =====  ==================  ==================  ==================
+===========  =====  ===============  ===============  ===============  ===============
+scene        bound  seed 1           seed 2           seed 3           seed 4
+===========  =====  ===============  ===============  ===============  ===============
+yard         2 %    0.95 % (0.9981)  1.07 % (0.9975)  0.89 % (0.9972)  0.81 % (0.9979)
+window_room  3 %    1.91 % (1.0008)  2.06 % (1.0029)  2.54 % (0.9997)  1.47 % (0.9980)
+===========  =====  ===============  ===============  ===============  ===============
+
+(With the row / column CDF sampler before it: yard 0.75 / 1.20 / 0.71 %, window_room 1.63 /
+1.68 / 1.90 / 2.64 % at seeds 1-4.)
 
 ``window_room`` (an interior lit only through a window with a light portal): reference
-4 x 2048 spp, worst bright region relative SE 0.53 %; seed 4 gives 2.64 % (1.0044). Over
+4 x 2048 spp, worst bright region relative SE 0.53 %. With the old sampler, over
 seeds 1-4 the bright regions' means are within 1.1 % of Cycles and their spread (SD) is
 0.5-1.6 %, largest in the two regions the sun patch's edges cross (its direct light). Before
 this test: 3.0 / 3.0 / 4.0 % at seeds 1-3 (whole image 0.983 / 0.990 / 0.986): sky photons

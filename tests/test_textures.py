@@ -133,3 +133,21 @@ def test_photons_leave_a_textured_emitter_by_texel_power():
     np.testing.assert_allclose(em.power.sum(axis=0), flux, rtol=0.03)
     bright = np.pi * 10.0 * TEXELS[0, 0, :3] * 0.25
     np.testing.assert_allclose(em.power[on_bright].sum(axis=0), bright, rtol=0.03)
+
+
+def test_a_pixels_texture_look_ups_are_one_stratified_set():
+    """``sampling.jittered_2d``, which places a pixel's spp x K extra texture look-ups
+    (``integrator.supersample_textures``): one point in each cell of an 8 x 14 grid for 112,
+    in a random order per pixel. Over a sharp texture edge (a diagonal half-plane) their mean
+    varies about half as much as that of 16 independent 7-point sets (what each sample drew
+    before: 1.31 % DiffCol noise on the textured room's floor, 0.89 % now)."""
+    rng = np.random.default_rng(5)
+    u = sampling.jittered_2d(400, 112, rng)
+    assert u.shape == (400, 112, 2) and np.all((u >= 0) & (u < 1))
+    cells = np.floor(u[..., 1] * 8).astype(int) * 14 + np.floor(u[..., 0] * 14).astype(int)
+    assert np.all(np.sort(cells, axis=1) == np.arange(112))       # one point per cell
+    assert not np.all(cells[0] == cells[1])                        # its own order per pixel
+    edge = lambda p: (p[..., 0] + 0.7 * p[..., 1] < 0.8).mean(axis=-1)   # noqa: E731
+    together = edge(u).std()
+    apart = edge(sampling.stratified_2d(400 * 16, 7, rng).reshape(400, 112, 2)).std()
+    assert together < 0.6 * apart, (together, apart)       # measured 0.46 (seed 5)
