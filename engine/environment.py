@@ -13,11 +13,12 @@ What it computes
       Strength x Color scale, RGB).
     * ``sample(u, u_cell=None)`` -> (wi (N, 3), radiance (N, 3), pdf (N,) [1/sr]):
       directions drawn from a piecewise-bilinear density over the equirectangular grid of the
-      texture's frame (flat texel cells for Closest: below). Knots sit at the texel centres; patch (i, j) spans knots (i, j) ..
-      (i + 1, j + 1), wrapping in u and in v (the top row's upper half is the south pole's
-      cap); inside a patch the density in (u, v) follows the bilinear surface of its four
-      knots plus ``PATCH_FLOOR`` x their mean, sampled with pbrt-v4's ``SampleBilinear``
-      (t from the marginal's linear density, s given t). A patch's weight is its mean knot
+      texture's frame (flat texel cells for Closest: below). Knots sit at the texel centres;
+      patch (i, j) spans knots (i, j) .. (i + 1, j + 1), wrapping in u and in v (the top
+      row's upper half is the south pole's cap); inside a patch the density in (u, v)
+      follows the bilinear surface of its four knots plus ``PATCH_FLOOR`` x their mean,
+      sampled with pbrt-v4's ``SampleBilinear`` (t from the marginal's linear density, s
+      given t). A patch's weight is its mean knot
       times the exact mean of sin(theta) over its v-range (the Jacobian of the sphere); the
       solid-angle density is p(u, v) / (2 pi^2 sin(theta)). The bilinear shape follows the
       interpolated image inside a texel (a sun a few texels wide is sampled by its shape, not
@@ -276,39 +277,42 @@ class Environment:
         self.weighted_patches = max(1, int(np.count_nonzero(flat_f > 0)))
         self.patch_share = f / total                      # (H, W) probability of each patch
 
-    def _bilinear(self, row, col, s, t):
-        """The floored bilinear surface of patches (row, col) at local (s, t), and its mean."""
+    def _corners(self, row, col):
+        """The four floored knots (k00, k10, k01, k11) of patches (row, col): (i, j),
+        (i, j + 1), (i + 1, j), (i + 1, j + 1), wrapping."""
         h, w = self.grid
         r1, c1 = (row + 1) % h, (col + 1) % w
-        k = self.knots
-        fl = self.floor[row, col]
-        value = ((1 - s) * (1 - t) * k[row, col] + s * (1 - t) * k[row, c1]
-                 + (1 - s) * t * k[r1, col] + s * t * k[r1, c1]) + fl
-        mean = 0.25 * (k[row, col] + k[row, c1] + k[r1, col] + k[r1, c1]) + fl
-        return value, mean
+        k, fl = self.knots, self.floor[row, col]
+        return k[row, col] + fl, k[row, c1] + fl, k[r1, col] + fl, k[r1, c1] + fl
+
+    @staticmethod
+    def _over_mean(corners, s, t):
+        """The bilinear surface of ``corners`` at local (s, t) over its mean (the density's
+        shape inside a patch)."""
+        k00, k10, k01, k11 = corners
+        value = (1 - s) * (1 - t) * k00 + s * (1 - t) * k10 + (1 - s) * t * k01 + s * t * k11
+        mean = 0.25 * (k00 + k10 + k01 + k11)
+        return value / np.where(mean > 0, mean, 1.0)
 
     def sample_uv(self, u_patch: np.ndarray, u: np.ndarray):
-        """(u, v) texture coordinates in [0, 1) and their
-        density in (u, v) (N,): a patch picked by ``u_patch`` (N,) from the sorted table, the
-        point inside it by ``u`` (N, 2) from the patch's bilinear surface (pbrt-v4's
+        """(u, v) texture coordinates in [0, 1) and their density in (u, v) (N,): a patch
+        picked by ``u_patch`` (N,) from the sorted table, the point inside it by ``u`` (N, 2):
+        uniform in a flat cell, else from the patch's bilinear surface (pbrt-v4's
         ``SampleBilinear``: t from the marginal's linear density, then s given t)."""
         h, w = self.grid
         u = np.clip(np.asarray(u, np.float64).reshape(-1, 2), 0.0, 1.0 - 1e-12)
         rank = np.clip(np.searchsorted(self.sorted_cdf, np.asarray(u_patch, np.float64),
                                        side="right") - 1, 0, self.weighted_patches - 1)
         row, col = np.divmod(self.patch_order[rank].astype(np.int64), w)
+        density = self.patch_share[row, col] * (w * h)
         if self.flat:
             s, t = u[:, 0], u[:, 1]
-            density = self.patch_share[row, col] * (w * h)
         else:
-            r1, c1 = (row + 1) % h, (col + 1) % w
-            k, fl = self.knots, self.floor[row, col]
-            k00, k10 = k[row, col] + fl, k[row, c1] + fl
-            k01, k11 = k[r1, col] + fl, k[r1, c1] + fl
+            corners = self._corners(row, col)
+            k00, k10, k01, k11 = corners
             t = _sample_linear(u[:, 1], k00 + k10, k01 + k11)
             s = _sample_linear(u[:, 0], k00 + (k01 - k00) * t, k10 + (k11 - k10) * t)
-            value, mean = self._bilinear(row, col, s, t)
-            density = self.patch_share[row, col] * (value / mean) * (w * h)
+            density = density * self._over_mean(corners, s, t)
         # The top row's upper half lies past v = 1: Repeat wraps it to the south pole's cap.
         off = self.offset
         return np.mod((col + off + s) / w, 1.0), np.mod((row + off + t) / h, 1.0), density
@@ -342,11 +346,9 @@ class Environment:
         s, t = su - col, sv - row
         col = np.mod(col.astype(np.int64), w)
         row = np.mod(row.astype(np.int64), h)
-        if self.flat:
-            p_uv = self.patch_share[row, col] * (w * h)
-        else:
-            value, mean = self._bilinear(row, col, s, t)
-            p_uv = self.patch_share[row, col] * (value / np.where(mean > 0, mean, 1.0)) * (w * h)
+        p_uv = self.patch_share[row, col] * (w * h)
+        if not self.flat:
+            p_uv = p_uv * self._over_mean(self._corners(row, col), s, t)
         sin_t = np.sqrt(np.maximum(0.0, 1.0 - tex[:, 2] ** 2))
         return np.where(sin_t > 0, p_uv / (2.0 * np.pi ** 2 * np.maximum(sin_t, 1e-300)), 0.0)
 
