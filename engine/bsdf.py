@@ -319,13 +319,19 @@ class SurfaceParams:
             {k: np.broadcast_to(np.asarray(v, np.float64), (len(material),))
              for k, v in ray.items()}
         self._cache = {}
+        # Slots a subset inherits, each taken from its parent's array when first read:
+        # {name: (parent's array, integer index into it)}.
+        self._inherited = {}
 
     def __len__(self):
         return len(self.material)
 
     def _take(self, name):
         if name not in self._cache:
-            if self.hits is not None and name in REFLECTANCE_SLOTS:
+            if name in self._inherited:
+                array, index = self._inherited.pop(name)
+                self._cache[name] = np.take(array, index, axis=0)
+            elif self.hits is not None and name in REFLECTANCE_SLOTS:
                 self._reflectance_slots()
             elif self.hits is not None and name in EMISSION_SLOTS:
                 self._emission_slots()
@@ -388,8 +394,11 @@ class SurfaceParams:
                                       + translucent)
         layer = np.take(table.layer_albedo, material, axis=0)
         if table.has_lobe_inputs:        # a specular layer mixed in, or metal, per hit
+            # Only hits on node-driven materials: elsewhere the lobe inputs are their means
+            # (ratio 1, NaN shares), whose factors are 1.
             closure = np.take(table.layer_closure, material)
-            mixed = np.flatnonzero(closure >= 0)
+            mixed = np.flatnonzero((closure >= 0)
+                                   & np.take(table.textured_reflectance, material))
             layer[mixed] *= ratio[mixed, closure[mixed], None]
             layer[mixed] *= metal_factor("dielectric", metallic[mixed, closure[mixed]],
                                          np.take(table.layer_metallic,
@@ -461,7 +470,16 @@ class SurfaceParams:
             out.directions = None if self.directions is None else self.directions[index]
             out.camera = None if self.camera is None else self.camera[index]
             out.ray = None if self.ray is None else {k: v[index] for k, v in self.ray.items()}
-            out._cache = {k: v[index] for k, v in self._cache.items() if k in TEXTURED_SLOTS}
+            # The parent's per-hit slots, indexed only when the subset reads them (most
+            # subsets read a few of them).
+            rows = np.arange(len(self.material))[index] if isinstance(index, slice) \
+                else np.asarray(index)
+            rows = np.flatnonzero(rows) if rows.dtype == bool else rows
+            out._inherited = {k: (v, rows) for k, v in self._cache.items()
+                              if k in TEXTURED_SLOTS}
+            out._inherited.update((k, (array, np.take(parent_rows, rows)))
+                                  for k, (array, parent_rows) in self._inherited.items()
+                                  if k not in out._inherited)
         return out
 
     def bsdf(self, transport: bool = False) -> "SurfaceBSDF":

@@ -374,8 +374,12 @@ class TriangleEmitter:
         cos_x = np.maximum(_dot(n, direction), 0.0)
         facing = self._facing(x, tri, direction)
         if self.radiance_at is not None:
-            points = x + direction * np.where(valid, dist, 0.0)[:, None]
-            facing = facing * np.where(valid, self.radiance_at(tri, points), 0.0)
+            # The texture is read only where the sample can count (in front of both).
+            live = np.flatnonzero(valid & (cos_x > 0) & (facing > 0))
+            radiance = np.zeros(count)
+            radiance[live] = self.radiance_at(tri[live], x[live] + direction[live]
+                                              * dist[live, None])
+            facing = facing * radiance
         elif self.scale is not None:
             facing = facing * self.scale[tri]        # the radiance there: rgb x its factor
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -433,19 +437,23 @@ def textured_emitters(name: str, scene, materials, triangles: np.ndarray, two_si
     radiance = materials.at(mids, prim, points[:, 0], points[:, 1]).emitted_radiance
     radiance = radiance.reshape(len(corners), k, 3).mean(axis=1)      # (S, 3)
     parents = np.asarray(triangles)[parent]                            # scene triangle per S
-    parent_tris = scene.triangles[parents].astype(np.float64)
+    # Per sub-triangle, the linear map from a point on its scene triangle's plane to that
+    # triangle's barycentrics (least squares on the plane): (bu, bv) = rows @ (p - origin).
+    t = scene.triangles[parents].astype(np.float64)
+    e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+    a11, a12, a22 = _dot(e1, e1), _dot(e1, e2), _dot(e2, e2)
+    det = a11 * a22 - a12 * a12
+    det = np.where(np.abs(det) > 1e-300, det, 1.0)[:, None]
+    rows = np.stack([(a22[:, None] * e1 - a12[:, None] * e2) / det,
+                     (a11[:, None] * e2 - a12[:, None] * e1) / det], axis=1)   # (S, 2, 3)
+    origin = t[:, 0]
 
     def radiance_of(channel, peak):
         def radiance_at(tri, points):
-            # The point's barycentrics in its scene triangle (least squares on the plane).
-            t = parent_tris[tri]
-            e1, e2, d = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0], points - t[:, 0]
-            a11, a12, a22 = _dot(e1, e1), _dot(e1, e2), _dot(e2, e2)
-            b1, b2 = _dot(d, e1), _dot(d, e2)
-            det = a11 * a22 - a12 * a12
-            det = np.where(np.abs(det) > 1e-300, det, 1.0)
-            bu = np.clip((a22 * b1 - a12 * b2) / det, 0.0, 1.0)
-            bv = np.clip((a11 * b2 - a12 * b1) / det, 0.0, 1.0 - bu)
+            bary = np.einsum("nij,nj->ni", np.take(rows, tri, axis=0),
+                             points - np.take(origin, tri, axis=0))
+            bu = np.clip(bary[:, 0], 0.0, 1.0)
+            bv = np.clip(bary[:, 1], 0.0, 1.0 - bu)
             prim = parents[tri]
             value = materials.at(scene.material_ids[prim], prim, bu, bv).emitted_radiance
             return value[:, channel] / peak
