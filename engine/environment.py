@@ -28,7 +28,14 @@ What it computes
       get a nearly fixed share of a point's samples, not a binomial one (with a row CDF and a
       column CDF, two numbers decide it jointly: 6 % pixel noise on the yard's sunlit ground
       at ``final`` from that alone). Without ``u_cell``, ``u[:, 0]`` picks the patch and its
-      remainder inside the patch's step of the table is reused to place the point.
+      remainder inside the patch's step of the table is reused to place the point. Photons
+      and the portals' probes draw from this table of all patches (``table``); light
+      samples draw from ``bright`` where the image has one: the same patches restricted to
+      those denser than ``BRIGHT_DENSITY`` x uniform (a sun), kept where they hold at least
+      ``BRIGHT_MIN_POWER`` of the image's weight. The rest of the sky is then left to the
+      light's cosine samples (``lights.EnvironmentLight``), which spread a diffuse point's
+      samples by its own cosine: on the yard's open ground the spread of a point's 8-sample
+      estimate falls from 4.4 % to 2.8 %, in the sun's shadow from 20 % to 13 %.
     * ``solid_angle_pdf(points, normals, wi)`` (N,) [1/sr]: that density for directions ``wi``
       (points and normals are not used: the sampler does not depend on them; the name and
       signature are the ones every light shares for MIS).
@@ -57,6 +64,11 @@ Parameters
     ``PATCH_FLOOR``     (module constant, 0.02) a patch's density floor, as a fraction of its
                         mean: keeps the density > 0 where a corner is dark, at 2 % of the
                         samples' efficiency on smooth patches
+    ``BRIGHT_DENSITY``  (module constant, 10) the density, over uniform, above which a patch
+                        is bright (a clear sky's gradient stays within a few times uniform,
+                        a sun is thousands of times denser)
+    ``BRIGHT_MIN_POWER`` (module constant, 0.25) the least share of the image's weight the
+                        bright patches must hold for light samples to use them alone
 
 Units: radiance W m^-2 sr^-1; densities 1/sr; directions unit vectors, Z up (Blender's).
 """
@@ -69,6 +81,10 @@ from .nodes import srgb_to_linear
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 CELL_MEAN = np.array([0.125, 0.75, 0.125])   # mean of a bilinear surface over a texel's cell
 PATCH_FLOOR = 0.02   # a patch's density: its bilinear surface + this x its mean (kept > 0)
+# The light samples' table (``Environment.bright``): patches denser than BRIGHT_DENSITY x
+# uniform, kept where they hold at least BRIGHT_MIN_POWER of the image's weight.
+BRIGHT_DENSITY = 10.0
+BRIGHT_MIN_POWER = 0.25
 
 
 def _cubic_weights(t):
@@ -272,10 +288,12 @@ class Environment:
         # number picks a patch (``sample(u, u_cell)``), so that a compact bright region (a
         # sun: a few patches holding most of the light) gets a nearly fixed count of a
         # point's samples, not a binomial one.
-        self.patch_order = np.argsort(-flat_f, kind="stable").astype(np.int32)
-        self.sorted_cdf = np.concatenate([[0.0], np.cumsum(flat_f[self.patch_order]) / total])
-        self.weighted_patches = max(1, int(np.count_nonzero(flat_f > 0)))
-        self.patch_share = f / total                      # (H, W) probability of each patch
+        self.table = PatchTable(f)
+        # The light samples' table: the patches BRIGHT_DENSITY x denser than uniform (a sun),
+        # where they hold at least BRIGHT_MIN_POWER of the image's weight; else None.
+        bright = self.table.share * (h * w) > BRIGHT_DENSITY
+        self.bright = PatchTable(np.where(bright, f, 0.0)) \
+            if self.table.share[bright].sum() >= BRIGHT_MIN_POWER else None
 
     def _corners(self, row, col):
         """The four floored knots (k00, k10, k01, k11) of patches (row, col): (i, j),
@@ -294,17 +312,17 @@ class Environment:
         mean = 0.25 * (k00 + k10 + k01 + k11)
         return value / np.where(mean > 0, mean, 1.0)
 
-    def sample_uv(self, u_patch: np.ndarray, u: np.ndarray):
+    def sample_uv(self, u_patch: np.ndarray, u: np.ndarray, table: "PatchTable | None" = None):
         """(u, v) texture coordinates in [0, 1) and their density in (u, v) (N,): a patch
-        picked by ``u_patch`` (N,) from the sorted table, the point inside it by ``u`` (N, 2):
-        uniform in a flat cell, else from the patch's bilinear surface (pbrt-v4's
-        ``SampleBilinear``: t from the marginal's linear density, then s given t)."""
+        picked by ``u_patch`` (N,) from the sorted ``table`` (default: all patches,
+        ``self.table``), the point inside it by ``u`` (N, 2): uniform in a flat cell, else
+        from the patch's bilinear surface (pbrt-v4's ``SampleBilinear``: t from the
+        marginal's linear density, then s given t)."""
         h, w = self.grid
+        table = self.table if table is None else table
         u = np.clip(np.asarray(u, np.float64).reshape(-1, 2), 0.0, 1.0 - 1e-12)
-        rank = np.clip(np.searchsorted(self.sorted_cdf, np.asarray(u_patch, np.float64),
-                                       side="right") - 1, 0, self.weighted_patches - 1)
-        row, col = np.divmod(self.patch_order[rank].astype(np.int64), w)
-        density = self.patch_share[row, col] * (w * h)
+        row, col = np.divmod(table.order[table.rank(u_patch)].astype(np.int64), w)
+        density = table.share[row, col] * (w * h)
         if self.flat:
             s, t = u[:, 0], u[:, 1]
         else:
@@ -317,27 +335,31 @@ class Environment:
         off = self.offset
         return np.mod((col + off + s) / w, 1.0), np.mod((row + off + t) / h, 1.0), density
 
-    def sample(self, u: np.ndarray, u_cell: np.ndarray | None = None):
+    def sample(self, u: np.ndarray, u_cell: np.ndarray | None = None,
+               table: "PatchTable | None" = None):
         """(wi (N, 3) unit world directions, radiance (N, 3), pdf (N,) [1/sr]) for numbers
-        ``u`` (N, 2) in [0, 1)^2; with ``u_cell`` (N,), the patch is picked by it and ``u``
-        places the point inside; without, ``u[:, 0]`` picks the patch and what is left of it
-        inside the patch's step of the table is reused in its place (module docstring)."""
+        ``u`` (N, 2) in [0, 1)^2, from ``table`` (default: all patches); with ``u_cell``
+        (N,), the patch is picked by it and ``u`` places the point inside; without,
+        ``u[:, 0]`` picks the patch and what is left of it inside the patch's step of the
+        table is reused in its place (module docstring)."""
+        table = self.table if table is None else table
         u = np.asarray(u, np.float64).reshape(-1, 2)
         if u_cell is None:
             u_cell = u[:, 0]
-            rank = np.clip(np.searchsorted(self.sorted_cdf, u_cell, side="right") - 1, 0,
-                           self.weighted_patches - 1)
-            lo, hi = self.sorted_cdf[rank], self.sorted_cdf[rank + 1]
+            rank = table.rank(u_cell)
+            lo, hi = table.cdf[rank], table.cdf[rank + 1]
             u = np.stack([(u_cell - lo) / np.where(hi > lo, hi - lo, 1.0), u[:, 1]], 1)
-        uu, vv, p_uv = self.sample_uv(u_cell, u)
+        uu, vv, p_uv = self.sample_uv(u_cell, u, table)
         tex = equirectangular_to_direction(uu, vv)
         sin_t = np.sin(np.pi * vv)
         pdf = np.where(sin_t > 0, p_uv / (2.0 * np.pi ** 2 * np.maximum(sin_t, 1e-300)), 0.0)
         wi = tex @ self.rotation                 # texture -> world (rotation transposed)
         return wi, self.radiance(wi), pdf
 
-    def direction_pdf(self, wi: np.ndarray) -> np.ndarray:
-        """Solid-angle density (N,) [1/sr] of ``sample`` at unit world directions ``wi``."""
+    def direction_pdf(self, wi: np.ndarray, table: "PatchTable | None" = None) -> np.ndarray:
+        """Solid-angle density (N,) [1/sr] of ``sample`` from ``table`` (default: all
+        patches) at unit world directions ``wi``."""
+        table = self.table if table is None else table
         tex = self.to_texture(wi)
         u, v = direction_to_equirectangular(tex)
         h, w = self.grid
@@ -346,7 +368,7 @@ class Environment:
         s, t = su - col, sv - row
         col = np.mod(col.astype(np.int64), w)
         row = np.mod(row.astype(np.int64), h)
-        p_uv = self.patch_share[row, col] * (w * h)
+        p_uv = table.share[row, col] * (w * h)
         if not self.flat:
             p_uv = p_uv * self._over_mean(self._corners(row, col), s, t)
         sin_t = np.sqrt(np.maximum(0.0, 1.0 - tex[:, 2] ** 2))
@@ -380,4 +402,28 @@ class Environment:
     @property
     def nbytes(self) -> int:
         return int(self.pixels.nbytes + self.knots.nbytes + self.floor.nbytes
-                   + self.patch_share.nbytes + self.patch_order.nbytes + self.sorted_cdf.nbytes)
+                   + self.table.nbytes + (self.bright.nbytes if self.bright else 0))
+
+
+class PatchTable:
+    """Patches sorted by weight, brightest first, in one 1-D table: ``share`` (H, W) each
+    patch's probability, ``order`` the flat patch indices by falling weight, ``cdf`` their
+    running sum (from 0 to 1), ``count`` the patches of weight > 0 (at least 1), from
+    weights ``f`` (H, W) >= 0 with a positive sum."""
+
+    def __init__(self, f: np.ndarray):
+        total = f.sum()
+        flat_f = f.ravel()
+        self.share = f / total
+        self.order = np.argsort(-flat_f, kind="stable").astype(np.int32)
+        self.cdf = np.concatenate([[0.0], np.cumsum(flat_f[self.order]) / total])
+        self.count = max(1, int(np.count_nonzero(flat_f > 0)))
+
+    def rank(self, u_patch) -> np.ndarray:
+        """The table rows (N,) that numbers ``u_patch`` (N,) in [0, 1) fall in."""
+        return np.clip(np.searchsorted(self.cdf, np.asarray(u_patch, np.float64),
+                                       side="right") - 1, 0, self.count - 1)
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.share.nbytes + self.order.nbytes + self.cdf.nbytes)

@@ -812,6 +812,7 @@ class WorldLight:
 
 
 ENV_CDF_SHARE = 0.75       # an image world's light samples drawn from its CDF (rest: cosine)
+BRIGHT_SHARE = 0.5         # ... from its bright patches' table where it has one (a sun)
 PORTAL_SHARE = 0.5         # where portals face a point: samples through them
 # Where the image's CDF sees out through the portals (its share ``phi`` of probe directions),
 # the portals' share falls to PORTAL_SHARE - PORTAL_SHIFT * phi and the CDF's gains it.
@@ -902,7 +903,10 @@ class EnvironmentLight:
       shines through the window the CDF finds it, the portal's area-uniform points seldom
       do): a portal by its approximate solid angle, an area-uniform point on it;
     * the image's CDF (``ENV_CDF_SHARE`` of the rest, plus the portals' ``PORTAL_SHIFT`` x
-      phi; a constant world: cosine instead);
+      phi; a constant world: cosine instead); where the image has bright patches (a sun:
+      ``environment.Environment.bright``), their table alone, at ``BRIGHT_SHARE`` of the
+      rest, so that the sun gets a fixed count of a point's samples and the smooth rest of
+      the sky the cosine samples;
     * cosine directions about the normal (the rest), which keep sky light seen past an
       occluder that takes the CDF's samples (under an overhang) low in noise.
     A sample's radiance is the image's along its direction (``rgb`` per sample:
@@ -917,11 +921,17 @@ class EnvironmentLight:
         self.constant = np.asarray(world.radiance, np.float64)
         self.portals = PortalSet(world.portals)
         self.rgb = np.ones(3)
-        self.cdf_share = ENV_CDF_SHARE if self.environment is not None else 0.0
+        # The image's table for light samples: its bright patches where it has them (a sun:
+        # ``BRIGHT_SHARE`` of the samples, the cosine strategy the rest of the sky), else
+        # all its patches (``ENV_CDF_SHARE``).
+        self.table = None if self.environment is None else self.environment.bright
+        self.cdf_share = 0.0 if self.environment is None else \
+            ENV_CDF_SHARE if self.table is None else BRIGHT_SHARE
         self.probes = np.zeros((0, 3))
         if self.environment is not None and len(self.portals):
             u = sampling.stratified_2d(1, PORTAL_PROBES ** 2, np.random.default_rng(0))[0]
-            self.probes = self.environment.sample(np.clip(u, 0.0, 1.0 - 1e-12))[0]
+            self.probes = self.environment.sample(np.clip(u, 0.0, 1.0 - 1e-12),
+                                                  table=self.table)[0]
 
     def radiance(self, directions):
         if self.environment is not None:
@@ -959,7 +969,8 @@ class EnvironmentLight:
         n = np.asarray(normals, np.float64).reshape(-1, 3)
         w = np.asarray(wi, np.float64).reshape(-1, 3)
         cos_pdf = np.maximum(_dot(n, w), 0.0) / np.pi
-        env_pdf = self.environment.direction_pdf(w) if self.environment is not None else 0.0
+        env_pdf = 0.0 if self.environment is None else \
+            self.environment.direction_pdf(w, self.table)
         sel, faces = self._portal_weights(x)
         if not faces.any():
             return self.cdf_share * env_pdf + (1.0 - self.cdf_share) * cos_pdf
@@ -1008,10 +1019,12 @@ class EnvironmentLight:
             if stratified:
                 w[idx] = self.environment.sample(
                     np.clip(u[idx], 0.0, 1.0 - 1e-12),
-                    u_cell=np.clip(pick[idx] / split[idx], 0.0, 1.0 - 1e-12))[0]
+                    u_cell=np.clip(pick[idx] / split[idx], 0.0, 1.0 - 1e-12),
+                    table=self.table)[0]
             else:
                 uu = np.stack([pick[idx] / split[idx], u[idx, 1]], 1)
-                w[idx] = self.environment.sample(np.clip(uu, 0.0, 1.0 - 1e-12))[0]
+                w[idx] = self.environment.sample(np.clip(uu, 0.0, 1.0 - 1e-12),
+                                                 table=self.table)[0]
         if cos.any():
             idx = np.flatnonzero(cos)
             if stratified:

@@ -3,18 +3,20 @@ reference of ``tests/data/make_world_refs.py`` (scenes: ``tests/world_scenes.py`
 region means of luminance, bright regions (over a tenth of the brightest) within the issue's
 bounds: 2 % for the yard, 3 % for the portal interior.
 
-Measured 2026-12-06 (``final``, the bilinear-patch HDRI sampler; worst bright region; the
-whole image's ratio), yard reference 4 x 512 spp, worst region relative SE 0.028 %:
+Measured 2026-12-06 (``final``; worst bright region; the whole image's ratio), yard
+reference 4 x 512 spp, worst region relative SE 0.028 %; light samples from the sun's bright
+patches alone (``environment.Environment.bright``), the rest of the sky by cosine samples:
 
 ===========  =====  ===============  ===============  ===============  ===============
 scene        bound  seed 1           seed 2           seed 3           seed 4
 ===========  =====  ===============  ===============  ===============  ===============
-yard         2 %    0.95 % (0.9981)  1.07 % (0.9975)  0.89 % (0.9972)  0.81 % (0.9979)
-window_room  3 %    1.91 % (1.0008)  2.06 % (1.0029)  2.54 % (0.9997)  1.47 % (0.9980)
+yard         2 %    0.95 % (0.9980)  1.02 % (0.9977)  1.11 % (0.9976)  0.91 % (0.9978)
+window_room  3 %    0.86 % (1.0013)  1.91 % (1.0032)  1.94 % (1.0005)  1.17 % (0.9994)
 ===========  =====  ===============  ===============  ===============  ===============
 
-(With the row / column CDF sampler before it: yard 0.75 / 1.20 / 0.71 %, window_room 1.63 /
-1.68 / 1.90 / 2.64 % at seeds 1-4.)
+(Light samples from the table of all patches, as photons draw them: yard 0.95 / 1.07 / 0.89 /
+0.81 %, window_room 1.91 / 2.06 / 2.54 / 1.47 %; with the row / column CDF sampler before
+that: yard 0.75 / 1.20 / 0.71 %, window_room 1.63 / 1.68 / 1.90 / 2.64 % at seeds 1-4.)
 
 ``window_room`` (an interior lit only through a window with a light portal): reference
 4 x 2048 spp, worst bright region relative SE 0.53 %. With the old sampler, over
