@@ -104,6 +104,23 @@ def _sample_linear(x: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.clip(t, 0.0, 1.0 - 1e-12)
 
 
+def _wrapped(i0: np.ndarray, offsets, n: int) -> list:
+    """Indices i0 + o wrapped into [0, n) (Repeat), one array per offset o (|o| < n)."""
+    base = np.mod(i0, n)
+    out = []
+    for o in offsets:
+        if len(offsets) > n:                     # a tiny image: offsets wrap more than once
+            out.append(np.mod(base + o, n))
+            continue
+        i = base + o
+        if o > 0:
+            i[i >= n] -= n
+        elif o < 0:
+            i[i < 0] += n
+        out.append(i)
+    return out
+
+
 def _filter_wrap(a: np.ndarray, kernel: np.ndarray, axis: int) -> np.ndarray:
     """``a`` convolved with a 3-tap ``kernel`` along ``axis``, wrapping (Repeat)."""
     return (kernel[0] * np.roll(a, 1, axis=axis) + kernel[1] * a
@@ -179,12 +196,13 @@ class Environment:
         """Image RGB (N, 3) at texture coordinates (u, v), linear, before ``strength``."""
         px = self.pixels
         h, w = px.shape[:2]
+        flat = px.reshape(h * w, px.shape[2])         # texels by flat index (one take each)
         u = np.asarray(u, np.float64)
         v = np.asarray(v, np.float64)
         if self.interpolation == "Closest":
             ix = np.mod(np.floor(u * w).astype(np.int64), w)
             iy = np.mod(np.floor(v * h).astype(np.int64), h)
-            out = px[iy, ix].astype(np.float64)
+            out = np.take(flat, iy * w + ix, axis=0).astype(np.float64)
         else:
             sx, sy = u * w - 0.5, v * h - 0.5
             fx, fy = np.floor(sx), np.floor(sy)
@@ -194,12 +212,12 @@ class Environment:
                 offs, wx, wy = (0, 1), (1.0 - tx, tx), (1.0 - ty, ty)
             else:                                          # Cubic, Smart: B-spline
                 offs, wx, wy = (-1, 0, 1, 2), _cubic_weights(tx), _cubic_weights(ty)
+            cols, rows = _wrapped(ix0, offs, w), _wrapped(iy0, offs, h)
             out = np.zeros((len(u), 3))
-            for j, oy in enumerate(offs):
-                iy = np.mod(iy0 + oy, h)
-                for i, ox in enumerate(offs):
-                    ix = np.mod(ix0 + ox, w)
-                    out += (wx[i] * wy[j])[:, None] * px[iy, ix]
+            for j, row in enumerate(rows):
+                row *= w
+                for i, ix in enumerate(cols):
+                    out += (wx[i] * wy[j])[:, None] * np.take(flat, row + ix, axis=0)
         if px.dtype == np.uint8:
             out /= 255.0
         if self.encoding == "srgb":
@@ -354,6 +372,8 @@ class Environment:
         sin_t = np.sin(np.pi * vv)
         pdf = np.where(sin_t > 0, p_uv / (2.0 * np.pi ** 2 * np.maximum(sin_t, 1e-300)), 0.0)
         wi = tex @ self.rotation                 # texture -> world (rotation transposed)
+        if self.projection == "EQUIRECTANGULAR":  # the image at the sampled (u, v) itself
+            return wi, self.lookup_uv(uu, vv) * self.strength, pdf
         return wi, self.radiance(wi), pdf
 
     def direction_pdf(self, wi: np.ndarray, table: "PatchTable | None" = None) -> np.ndarray:

@@ -1014,17 +1014,18 @@ class EnvironmentLight:
             p = self.portals.sample_points(k, np.stack([u0, u[idx, 1]], 1))
             d = p - x[idx]
             w[idx] = d / np.maximum(np.linalg.norm(d, axis=1), 1e-300)[:, None]
+        rgb = np.zeros((count, 3))
         if env.any():
             idx = np.flatnonzero(env)
             if stratified:
-                w[idx] = self.environment.sample(
+                w[idx], rgb[idx], _ = self.environment.sample(
                     np.clip(u[idx], 0.0, 1.0 - 1e-12),
                     u_cell=np.clip(pick[idx] / split[idx], 0.0, 1.0 - 1e-12),
-                    table=self.table)[0]
+                    table=self.table)
             else:
                 uu = np.stack([pick[idx] / split[idx], u[idx, 1]], 1)
-                w[idx] = self.environment.sample(np.clip(uu, 0.0, 1.0 - 1e-12),
-                                                 table=self.table)[0]
+                w[idx], rgb[idx], _ = self.environment.sample(np.clip(uu, 0.0, 1.0 - 1e-12),
+                                                              table=self.table)
         if cos.any():
             idx = np.flatnonzero(cos)
             if stratified:
@@ -1039,9 +1040,11 @@ class EnvironmentLight:
         cos_x = np.maximum(_dot(n64, w), 0.0)
         ok = (pdf > 0) & (cos_x > 0)
         weight = np.where(ok, cos_x / np.where(ok, pdf, 1.0), 0.0)
-        rgb = np.zeros((count, 3))
-        if ok.any():
-            rgb[ok] = self.radiance(w[ok])
+        rgb[~ok] = 0.0
+        # The image's own samples carry their radiance; the others look it up.
+        look = np.flatnonzero(ok & ~env)
+        if len(look):
+            rgb[look] = self.radiance(w[look])
         return w, np.full(count, np.inf), weight, rgb
 
     def sample(self, x, n, u):

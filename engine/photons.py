@@ -72,6 +72,7 @@ from .surfaces import SceneSurfaces
 from .textures import DIFFUSE_RAY
 
 EXTERIOR_SHARE = 0.25     # with portals: the world's photons from its disc, outside them
+EMIT_BATCH = 1 << 16      # sky photons drawn from an image world per batch
 
 
 def _spread_bits(v: np.ndarray) -> np.ndarray:
@@ -222,14 +223,30 @@ def _cosine_weighted_radiance(world, portals) -> np.ndarray:
     return np.array(out).reshape(-1, 3)
 
 
-def _environment_photons(world, u, v, n):
-    """Directions of travel (n, 3) and powers per unit disc area x n [W/m^2] (n, 3) of photons
-    from an image world: sky directions from its CDF (``environment.Environment.sample``),
-    power L / p (pbrt-v3 ``InfiniteAreaLight::Sample_Le``)."""
-    wi, radiance, pdf = world.environment.sample(u)
-    ok = pdf > 0
-    power = np.where(ok[:, None], radiance / np.where(ok, pdf, 1.0)[:, None], 0.0)
-    return -wi, power
+def _disc_photons(world, center, radius, back, u, v, n):
+    """Photons of the world from its disc of ``radius`` [m] facing ``center``, ``back`` [m]
+    behind it along each direction: origins and directions of travel (n, 3) and, for an image
+    world, powers per unit disc area x n [W/m^2] (n, 3) (else None): sky directions from its
+    CDF (``environment.Environment.sample``), power L / p (pbrt-v3
+    ``InfiniteAreaLight::Sample_Le``); a constant world's uniform over the sphere. In batches
+    of ``EMIT_BATCH``: a million photons' temporaries at once cost more in fresh memory pages
+    than in arithmetic (the yard's million sky directions: 1.2 s at once, 0.5 s in batches)."""
+    origins, travel = np.empty((n, 3)), np.empty((n, 3))
+    power = None if world.environment is None else np.empty((n, 3))
+    for start in range(0, n, EMIT_BATCH):
+        part = slice(start, start + EMIT_BATCH)
+        if world.environment is not None:
+            wi, radiance, pdf = world.environment.sample(u[part])
+            ok = pdf > 0
+            d = -wi
+            power[part] = np.where(ok[:, None], radiance / np.where(ok, pdf, 1.0)[:, None], 0.0)
+        else:
+            d = -sampling.square_to_sphere(u[part])           # travelling inwards
+        t, b = sampling.orthonormal_basis(d)
+        disk = sampling.square_to_disk(v[part]) * radius
+        origins[part] = center - d * back + disk[:, 0:1] * t + disk[:, 1:2] * b
+        travel[part] = d
+    return origins, travel, power
 
 
 def emit_photons(scene: Scene, count: int, rng: np.random.Generator,
@@ -321,15 +338,10 @@ def emit_photons(scene: Scene, count: int, rng: np.random.Generator,
             power = m / np.maximum(picked[:, None], 1e-30) * (flux @ LUMINANCE) / n
         elif kind == "world":
             center, radius = spec[1], spec[2]
-            if scene.world.environment is not None:
+            o, d, per_area = _disc_photons(scene.world, center, radius, spec[5], u, v, n)
+            if per_area is not None:
                 # Directions from the image's CDF, power L / p over the disc's area.
-                d, per_area = _environment_photons(scene.world, u, v, n)
                 power = per_area * (np.pi * radius ** 2 / n)
-            else:
-                d = -sampling.square_to_sphere(u)                 # travelling inwards
-            t, b = sampling.orthonormal_basis(d)
-            disk = sampling.square_to_disk(v) * radius
-            o = center - d * spec[5] + disk[:, 0:1] * t + disk[:, 1:2] * b
             if spec[3] is not None:
                 # Outside the portals: those entering one first are the portal photons'.
                 keep = np.flatnonzero(~_enters_portal(o, d, spec[3], accel)
