@@ -223,17 +223,19 @@ def _cosine_weighted_radiance(world, portals) -> np.ndarray:
     return np.array(out).reshape(-1, 3)
 
 
-def _disc_photons(world, center, radius, back, u, v, n):
+def _disc_photons(world, center, radius, back, u, v, n, pool=None):
     """Photons of the world from its disc of ``radius`` [m] facing ``center``, ``back`` [m]
     behind it along each direction: origins and directions of travel (n, 3) and, for an image
     world, powers per unit disc area x n [W/m^2] (n, 3) (else None): sky directions from its
     CDF (``environment.Environment.sample``), power L / p (pbrt-v3
     ``InfiniteAreaLight::Sample_Le``); a constant world's uniform over the sphere. In batches
     of ``EMIT_BATCH``: a million photons' temporaries at once cost more in fresh memory pages
-    than in arithmetic (the yard's million sky directions: 1.2 s at once, 0.5 s in batches)."""
+    than in arithmetic (the yard's million sky directions: 1.2 s at once, 0.5 s in batches),
+    on ``pool``'s threads where one is given (each batch fills its own rows)."""
     origins, travel = np.empty((n, 3)), np.empty((n, 3))
     power = None if world.environment is None else np.empty((n, 3))
-    for start in range(0, n, EMIT_BATCH):
+
+    def batch(start):
         part = slice(start, start + EMIT_BATCH)
         if world.environment is not None:
             wi, radiance, pdf = world.environment.sample(u[part])
@@ -246,16 +248,24 @@ def _disc_photons(world, center, radius, back, u, v, n):
         disk = sampling.square_to_disk(v[part]) * radius
         origins[part] = center - d * back + disk[:, 0:1] * t + disk[:, 1:2] * b
         travel[part] = d
+
+    starts = range(0, n, EMIT_BATCH)
+    if pool is None or len(starts) < 2:
+        for start in starts:
+            batch(start)
+    else:
+        list(pool.map(batch, starts))
     return origins, travel, power
 
 
 def emit_photons(scene: Scene, count: int, rng: np.random.Generator,
-                 accel=None, target=None) -> EmittedPhotons:
+                 accel=None, target=None, pool=None) -> EmittedPhotons:
     """``count`` photons shared among the lights in proportion to their flux. ``accel``:
     the scene's ``Accelerator``, which photons through light portals need (a photon whose
     way out to the sky is blocked carries nothing). ``target``: the sphere the sun's and the
     world's photons are aimed at (``_light_fluxes``; the caustic map's
-    ``specular_bounds``)."""
+    ``specular_bounds``). ``pool``: threads that draw the world's disc photons in batches
+    (the same photons without)."""
     lights = _photon_lights(scene, target)
     if not lights or count <= 0:
         z = np.zeros((0, 3))
@@ -338,7 +348,7 @@ def emit_photons(scene: Scene, count: int, rng: np.random.Generator,
             power = m / np.maximum(picked[:, None], 1e-30) * (flux @ LUMINANCE) / n
         elif kind == "world":
             center, radius = spec[1], spec[2]
-            o, d, per_area = _disc_photons(scene.world, center, radius, spec[5], u, v, n)
+            o, d, per_area = _disc_photons(scene.world, center, radius, spec[5], u, v, n, pool)
             if per_area is not None:
                 # Directions from the image's CDF, power L / p over the disc's area.
                 power = per_area * (np.pi * radius ** 2 / n)
@@ -365,12 +375,16 @@ def emit_photons(scene: Scene, count: int, rng: np.random.Generator,
             o = o + away * offset_distance(o, scene.extent)[:, None]
         origins.append(o); directions.append(d); powers.append(power)
         per_light[name] = int(n)
-    r2 = np.concatenate(r2s)
+    r2 = _joined(r2s)
     soft = bool(np.any(r2 > 0))
-    return EmittedPhotons(np.concatenate(origins), np.concatenate(directions),
-                          np.concatenate(powers), per_light,
-                          falloff_center=np.concatenate(centers) if soft else None,
+    return EmittedPhotons(_joined(origins), _joined(directions), _joined(powers), per_light,
+                          falloff_center=_joined(centers) if soft else None,
                           falloff_r2=r2 if soft else None)
+
+
+def _joined(parts: list) -> np.ndarray:
+    """The lights' arrays one after another (a lone light's as it is, not copied)."""
+    return np.concatenate(parts) if len(parts) != 1 else np.ascontiguousarray(parts[0])
 
 
 def _portal_photons(scene, world, portals, u, v, n, accel):
@@ -957,8 +971,23 @@ def build_photon_map(scene: Scene, accel, count: int, seed: int = 0, max_bounces
     ``ray_log`` (a list) receives every traced batch of photon rays (for the benchmark)."""
     from concurrent.futures import ThreadPoolExecutor
 
+    own_pool = pool is None and workers > 1 and count > PHOTON_CHUNK
+    executor = ThreadPoolExecutor(workers) if own_pool else pool
+    try:
+        return _emit_and_trace(scene, accel, count, seed, max_bounces, keep, library, pool,
+                               executor, progress, cancelled, ray_log)
+    finally:
+        if own_pool:
+            executor.shutdown(wait=True, cancel_futures=True)
+
+
+def _emit_and_trace(scene, accel, count, seed, max_bounces, keep, library, pool, executor,
+                    progress, cancelled, ray_log) -> PhotonMap:
+    """``build_photon_map`` on ``executor`` (None: in this thread); ``pool``: the caller's,
+    for the stages that take one as given."""
     t0 = time.perf_counter()
-    emitted = emit_photons(scene, count, sampling.rng_for(seed, sampling.STREAM_PHOTON, 0), accel)
+    emitted = emit_photons(scene, count, sampling.rng_for(seed, sampling.STREAM_PHOTON, 0), accel,
+                           pool=executor)
     emit_seconds = time.perf_counter() - t0
     n = len(emitted.origins)
     bounds = [(a, min(a + PHOTON_CHUNK, n)) for a in range(0, n, PHOTON_CHUNK)]
@@ -973,23 +1002,17 @@ def build_photon_map(scene: Scene, accel, count: int, seed: int = 0, max_bounces
 
     t0 = time.perf_counter()
     maps, was_cancelled = [], False
-    own_pool = pool is None and workers > 1 and len(bounds) > 1
-    executor = ThreadPoolExecutor(workers) if own_pool else pool
-    try:
-        if executor is None:
-            results = (trace(i) for i in range(len(bounds)))
-        else:
-            results = executor.map(trace, range(len(bounds)))
-        for i, part in enumerate(results):
-            maps.append(part)
-            if progress is not None:
-                progress((i + 1) / len(bounds))
-            if cancelled is not None and cancelled():
-                was_cancelled = True
-                break
-    finally:
-        if own_pool:
-            executor.shutdown(wait=True, cancel_futures=True)
+    if executor is None or len(bounds) < 2:
+        results = (trace(i) for i in range(len(bounds)))
+    else:
+        results = executor.map(trace, range(len(bounds)))
+    for i, part in enumerate(results):
+        maps.append(part)
+        if progress is not None:
+            progress((i + 1) / len(bounds))
+        if cancelled is not None and cancelled():
+            was_cancelled = True
+            break
     trace_seconds = time.perf_counter() - t0
     pmap = _concatenate(maps) if maps else PhotonMap(*(np.zeros((0, 3), np.float32),) * 2,
                                                     np.zeros((0, 3), np.float16), np.zeros((0, 3), np.float16),
