@@ -42,16 +42,18 @@ What it computes
     * ``integral()`` (3,) [W m^-2]: the radiance integrated over the sphere (for photon shares
       and the mean colour).
 
-    Unbiased wherever the image is: every patch whose interpolated radiance is > 0 somewhere
-    has a positive density (the floor). Knots are the texels themselves for Linear (it reads
-    only a patch's four corners there); Cubic's B-spline reaches one texel further, so its
-    knots are the texels smoothed once by (1/8, 3/4, 1/8) per axis. Closest is constant over
-    each texel, so an equirectangular Closest image is sampled by flat patches that are the
-    texels' own cells (bilinear patches straddle a sun's sharp texel edges: the spread of a
-    point's 8-sample light estimate under a 3 x 3-texel sun 21 % that way, 7 % with flat
-    cells, 7.4 % for the same sun under Linear). A mirror-ball image is resampled onto an
-    equirectangular grid of 2H x H knots (the maximum of 3 x 3 look-ups around each, smoothed
-    twice) for its distribution. Non-finite texels weigh 0.
+    Unbiased wherever the image is: in the table of all patches every patch whose
+    interpolated radiance is > 0 somewhere has a positive density (the floor); the bright
+    table leaves the other patches to the light's cosine samples, which reach every direction
+    above a point. Knots are the texels themselves for Linear (it reads only a patch's four
+    corners there); Cubic's B-spline reaches one texel further, so its knots are the texels
+    smoothed once by (1/8, 3/4, 1/8) per axis. Closest is constant over each texel, so an
+    equirectangular Closest image is sampled by flat patches that are the texels' own cells
+    (bilinear patches straddle a sun's sharp texel edges: the spread of a point's 8-sample
+    light estimate under a 3 x 3-texel sun 21 % that way, 7 % with flat cells, 7.4 % for the
+    same sun under Linear, all from the table of all patches). A mirror-ball image is
+    resampled onto an equirectangular grid of 2H x H knots (the maximum of 3 x 3 look-ups
+    around each, smoothed twice) for its distribution. Non-finite texels weigh 0.
 
 Parameters
     ``pixels``          (H, W, C) float32 (linear) or uint8 (encoded), C >= 3, bottom row first
@@ -64,9 +66,9 @@ Parameters
     ``PATCH_FLOOR``     (module constant, 0.02) a patch's density floor, as a fraction of its
                         mean: keeps the density > 0 where a corner is dark, at 2 % of the
                         samples' efficiency on smooth patches
-    ``BRIGHT_DENSITY``  (module constant, 10) the density, over uniform, above which a patch
-                        is bright (a clear sky's gradient stays within a few times uniform,
-                        a sun is thousands of times denser)
+    ``BRIGHT_DENSITY``  (module constant, 10) the radiance, over the sphere's mean, above
+                        which a patch is bright (a clear sky's gradient stays within a few
+                        times its mean, a sun is thousands of times brighter)
     ``BRIGHT_MIN_POWER`` (module constant, 0.25) the least share of the image's weight the
                         bright patches must hold for light samples to use them alone
 
@@ -307,9 +309,12 @@ class Environment:
         # sun: a few patches holding most of the light) gets a nearly fixed count of a
         # point's samples, not a binomial one.
         self.table = PatchTable(f)
-        # The light samples' table: the patches BRIGHT_DENSITY x denser than uniform (a sun),
-        # where they hold at least BRIGHT_MIN_POWER of the image's weight; else None.
-        bright = self.table.share * (h * w) > BRIGHT_DENSITY
+        # The light samples' table: the patches whose radiance is over BRIGHT_DENSITY x the
+        # sphere's mean (their solid-angle density over uniform: a sun near a pole as near
+        # the horizon), where they hold at least BRIGHT_MIN_POWER of the image's weight;
+        # else None.
+        sphere_mean = total / (w * mean_sin.sum())
+        bright = mean > BRIGHT_DENSITY * sphere_mean
         self.bright = PatchTable(np.where(bright, f, 0.0)) \
             if self.table.share[bright].sum() >= BRIGHT_MIN_POWER else None
 

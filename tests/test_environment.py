@@ -225,9 +225,8 @@ def test_constant_image_renders_like_the_uniform_world():
 
 def test_light_samples_take_a_suns_patches_alone_and_a_smooth_sky_whole():
     """The light samples' table (``Environment.bright``) holds the sun's patches alone (the
-    3 x 3-texel sun holds 88 % of the image's weight); a sky without a sun, whose densest
-    patch is 3.1 x uniform (the upper hemisphere's patches at the poles' thin rows), keeps
-    the table of all patches."""
+    3 x 3-texel sun holds 88 % of the image's weight); a sky without a sun, at most twice the
+    sphere's mean radiance (its lower half black), keeps the table of all patches."""
     sun = Environment(_sun_image())
     rows, cols = np.nonzero(sun.bright.share)
     assert rows.min() >= SUN_ROWS[0] - 1 and rows.max() <= SUN_ROWS[1]
