@@ -31,11 +31,12 @@ What it computes
       remainder inside the patch's step of the table is reused to place the point. Photons
       and the portals' probes draw from this table of all patches (``table``); light
       samples draw from ``bright`` where the image has one: the same patches restricted to
-      those denser than ``BRIGHT_DENSITY`` x uniform (a sun), kept where they hold at least
-      ``BRIGHT_MIN_POWER`` of the image's weight. The rest of the sky is then left to the
-      light's cosine samples (``lights.EnvironmentLight``), which spread a diffuse point's
-      samples by its own cosine: on the yard's open ground the spread of a point's 8-sample
-      estimate falls from 4.4 % to 2.8 %, in the sun's shadow from 20 % to 13 %.
+      those whose radiance is over ``BRIGHT_DENSITY`` x the sphere's mean (a sun), kept
+      where they hold at least ``BRIGHT_MIN_POWER`` of the image's weight. The rest of the
+      sky is then left to the light's cosine samples (``lights.EnvironmentLight``), which
+      spread a diffuse point's samples by its own cosine: on the yard's open ground the
+      spread of a point's 8-sample estimate falls from 4.4 % to 2.8 %, in the sun's shadow
+      from 20 % to 13 %.
     * ``solid_angle_pdf(points, normals, wi)`` (N,) [1/sr]: that density for directions ``wi``
       (points and normals are not used: the sampler does not depend on them; the name and
       signature are the ones every light shares for MIS).
@@ -83,8 +84,9 @@ from .nodes import srgb_to_linear
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 CELL_MEAN = np.array([0.125, 0.75, 0.125])   # mean of a bilinear surface over a texel's cell
 PATCH_FLOOR = 0.02   # a patch's density: its bilinear surface + this x its mean (kept > 0)
-# The light samples' table (``Environment.bright``): patches denser than BRIGHT_DENSITY x
-# uniform, kept where they hold at least BRIGHT_MIN_POWER of the image's weight.
+# The light samples' table (``Environment.bright``): patches whose radiance is over
+# BRIGHT_DENSITY x the sphere's mean, kept where they hold at least BRIGHT_MIN_POWER of the
+# image's weight.
 BRIGHT_DENSITY = 10.0
 BRIGHT_MIN_POWER = 0.25
 
@@ -303,7 +305,6 @@ class Environment:
         mean_sin = (mean_sin + (1.0 - np.cos(np.pi * over)) / np.pi) * h
         f = mean * mean_sin[:, None]
         total = f.sum()
-        flat_f = f.ravel()
         # Patches sorted by weight, brightest first, in one 1-D table: a caller's stratified
         # number picks a patch (``sample(u, u_cell)``), so that a compact bright region (a
         # sun: a few patches holding most of the light) gets a nearly fixed count of a

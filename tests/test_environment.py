@@ -7,7 +7,9 @@ about 20 s).
   bins of 200k samples (bins expecting < 5 merged), p > 1e-4; this and the integral for
   Linear and Cubic (bilinear patches between texel centres) and Closest (flat texel cells);
 * a point's 8 light samples under a sun share it evenly (the estimate's spread over points:
-  7.4 % Linear, 7.0 % Closest, bound 8.5 %; 23.6 % / 9.4 % with the row and column CDFs);
+  3.9 % Linear, 2.5 % Closest, bound 5 %; 7.4 % / 7.0 % with the table of all patches,
+  23.6 % / 9.4 % with the row and column CDFs), and the light samples' table holds a sun's
+  patches alone;
 * a plane under an environment of a small bright patch ("sun", Closest interpolation, so the
   patch is exactly its cells) and a dim sky: the direct light's irradiance against the
   analytic integral of L cos over the cells, within 4 standard errors measured from the
