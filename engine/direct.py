@@ -84,12 +84,20 @@ def irradiance_from_terms(terms, count: int) -> np.ndarray:
 def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.random.Generator,
                  light_samples: int = 4, stats: dict | None = None,
                  offset_normals: np.ndarray | None = None, ray_log: list | None = None,
-                 shadow_map=None, with_directions: bool = False) -> list:
+                 shadow_map=None, with_directions: bool = False,
+                 pixel_slots: tuple | None = None) -> list:
     """Irradiance as a list of terms (target, scalar, rgb): term i adds ``scalar * rgb`` to
     points ``target`` (None: every point, in order); ``rgb`` is a light's (3,) or, for an
     image world (``lights.EnvironmentLight``), one radiance per sample (K, 3). Callers that weight the irradiance per
     point (albedo, pixel) can then do so on scalars instead of (N, 3) arrays.
     ``shadow_map``: a ``ShadowPhotonMap``; None traces every shadow ray (module docstring).
+    ``pixel_slots``: (primary-ray indices (N,), samples per pixel) at a camera path's first
+    hits: the light numbers (the light's choice, a world's strategy and patch, the 2-D
+    position) are then stratified over each pixel's samples x ``light_samples``
+    (``sampling.pixel_stratified``) rather than over each point's: with one light sample a
+    sample, a world's sun and sky strategies still split evenly over the pixel (the yard at
+    16 x 1 samples: 16.2 % -> 4.4 % error), and more camera samples with fewer light samples
+    each cost no more light noise.
     ``with_directions``: terms are (target, scalar, rgb, directions, hittable, light)
     instead, with each sample's unit direction to the light (rows of ``scalar``), what a ray
     could hit of the light (``_hittable``: ``"mesh"``, ``"world"``, ``"area"`` or ``""``) and
@@ -119,8 +127,12 @@ def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.
     # Sampled lights: K stratified samples per point, light chosen by estimated contribution.
     if lights.sampled and light_samples > 0:
         k = int(light_samples)
-        u2 = sampling.stratified_2d(count, k, rng)                     # (N, K, 2)
-        u_pick = (np.argsort(rng.random((count, k)), axis=1) + rng.random((count, k))) / k
+        if pixel_slots is not None:
+            # Camera hits: stratified over the pixel's samples x K (module docstring).
+            u2, u_pick = sampling.pixel_stratified(pixel_slots[0], pixel_slots[1], k, rng)
+        else:
+            u2 = sampling.stratified_2d(count, k, rng)                 # (N, K, 2)
+            u_pick = (np.argsort(rng.random((count, k)), axis=1) + rng.random((count, k))) / k
         probs = lights.selection_weights(x, n)                          # (N, L)
         cdf = np.cumsum(probs, axis=1)
         choice = np.minimum((cdf[:, None, :] < u_pick[..., None]).sum(axis=2), len(lights.sampled) - 1)

@@ -922,14 +922,17 @@ def _add_irradiance(e, at, surface, glossy, thr, rays, spp, depth, indirect_sums
     add_to_pixels(indirect_sums, rays[at] // spp, value)
 
 
-def _counted_direct_terms(context, stats, rng, x, ns, ng, with_directions=False):
+def _counted_direct_terms(context, stats, rng, x, ns, ng, with_directions=False, rays=None):
     """``direct.direct_terms`` at points (x, ns, ng) with the render's lights and light
-    samples, its shadow-ray counters added to ``stats``."""
+    samples, its shadow-ray counters added to ``stats``. ``rays``: the points' primary-ray
+    indices, at a path's first vertex: their light numbers are then stratified over each
+    pixel's samples (``sampling.pixel_stratified``)."""
     settings = context.settings
     shadow_stats = {}
     terms = direct_terms(x, ns, context.lights, context.accel, rng, settings.light_samples,
                          stats=shadow_stats, offset_normals=ng, ray_log=context.ray_log,
-                         shadow_map=context.shadow_map, with_directions=with_directions)
+                         shadow_map=context.shadow_map, with_directions=with_directions,
+                         pixel_slots=None if rays is None else (rays, settings.samples))
     stats["shadow_rays"] += shadow_stats.get("shadow_rays", 0)
     for key in ("shadow_rays_saved", "shadow_lit", "shadow_umbra", "shadow_penumbra"):
         stats[key] = stats.get(key, 0) + shadow_stats.get(key, 0)
@@ -946,7 +949,7 @@ def _shade_direct_rough(context, stats, rng, depth, on, x, ns, ng, thr, rays, di
     if len(on) == 0:
         return
     terms = _counted_direct_terms(context, stats, rng, x[on], ns[on], ng[on],
-                                  with_directions=True)
+                                  with_directions=True, rays=rays[on] if depth == 0 else None)
     rows = rough.row_of[on]
     lobe, wo, n = rough.lobe.subset(rows), rough.wo[rows], rough.n[rows]
     radiance = np.zeros((len(on), 3))
@@ -976,7 +979,8 @@ def _shade_direct(context, stats, rng, depth, idx, x, ns, ng, surface, thr, rays
     material) histogram and multiply by the materials' rho_d / pi once, instead of per hit."""
     settings, materials = context.settings, context.surfaces.materials
     spp = settings.samples
-    terms = _counted_direct_terms(context, stats, rng, x[idx], ns[idx], ng[idx])
+    terms = _counted_direct_terms(context, stats, rng, x[idx], ns[idx], ng[idx],
+                                  rays=rays[idx] if depth == 0 else None)
     count = materials.count
     if depth == 0 and materials.constant_per_material and count <= MAX_HISTOGRAM_MATERIALS:
         mat_d = surface.material[idx]

@@ -84,6 +84,28 @@ def jittered_2d(groups: int, count: int, rng: np.random.Generator) -> np.ndarray
     return u
 
 
+def pixel_stratified(rays: np.ndarray, spp: int, count: int, rng: np.random.Generator
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Light-sample numbers stratified over each pixel's samples instead of each point's.
+
+    ``rays`` (N,): primary-ray indices (pixel x ``spp`` + sample), each at most once; each
+    point takes ``count`` numbers. A pixel's ``spp`` x ``count`` slots share one set: 2-D
+    numbers from a jittered grid over them (``jittered_2d``) and a 1-D number from a
+    stratified line, each in its own random order per pixel, so any one point's numbers are
+    uniform (unbiased) while the pixel's sum sees every stratum once. Returns (u2 (N, count,
+    2), u1 (N, count)). Costs numbers for every slot of the pixels present: for the primary
+    hits of a block, where most slots are."""
+    rays = np.asarray(rays, np.int64)
+    pixel, sample = np.divmod(rays, int(spp))
+    present, row = np.unique(pixel, return_inverse=True)
+    slots = int(spp) * int(count)
+    grid = jittered_2d(len(present), slots, rng)                          # (P, slots, 2)
+    line = (np.argsort(rng.random((len(present), slots)), axis=1)
+            + rng.random((len(present), slots))) / slots                   # (P, slots)
+    col = sample[:, None] * int(count) + np.arange(int(count))[None, :]   # (N, count)
+    return grid[row[:, None], col], line[row[:, None], col]
+
+
 # Row-wise helpers for (N, 3) vectors. numpy broadcasts over a last axis of 3 slowly (one
 # inner loop per row), so these work on the three columns instead (one loop over N each).
 def dot_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
