@@ -36,7 +36,8 @@ What it computes
       sky is then left to the light's cosine samples (``lights.EnvironmentLight``), which
       spread a diffuse point's samples by its own cosine: on the yard's open ground the
       spread of a point's 8-sample estimate falls from 4.4 % to 2.8 %, in the sun's shadow
-      from 20 % to 13 %.
+      from 20 % to 13 %; or, where a final gather runs, to the gather's rays that leave the
+      scene (``smooth_radiance``: the image outside the bright patches).
     * ``solid_angle_pdf(points, normals, wi)`` (N,) [1/sr]: that density for directions ``wi``
       (points and normals are not used: the sampler does not depend on them; the name and
       signature are the ones every light shares for MIS).
@@ -316,8 +317,9 @@ class Environment:
         # else None.
         sphere_mean = total / (w * mean_sin.sum())
         bright = mean > BRIGHT_DENSITY * sphere_mean
-        self.bright = PatchTable(np.where(bright, f, 0.0)) \
-            if self.table.share[bright].sum() >= BRIGHT_MIN_POWER else None
+        power = float(self.table.share[bright].sum())
+        self.bright = PatchTable(np.where(bright, f, 0.0)) if power >= BRIGHT_MIN_POWER else None
+        self.bright_power = power if self.bright is not None else 0.0   # its share of weight
 
     def _corners(self, row, col):
         """The four floored knots (k00, k10, k01, k11) of patches (row, col): (i, j),
@@ -382,23 +384,44 @@ class Environment:
             return wi, self.lookup_uv(uu, vv) * self.strength, pdf
         return wi, self.radiance(wi), pdf
 
-    def direction_pdf(self, wi: np.ndarray, table: "PatchTable | None" = None) -> np.ndarray:
-        """Solid-angle density (N,) [1/sr] of ``sample`` from ``table`` (default: all
-        patches) at unit world directions ``wi``."""
-        table = self.table if table is None else table
+    def _patch_of(self, wi: np.ndarray):
+        """The patches (row, col) that unit world directions ``wi`` (N, 3) fall in, their
+        local (s, t) and the directions in the texture's frame."""
         tex = self.to_texture(wi)
         u, v = direction_to_equirectangular(tex)
         h, w = self.grid
         su, sv = u * w - self.offset, v * h - self.offset
         col, row = np.floor(su), np.floor(sv)
         s, t = su - col, sv - row
-        col = np.mod(col.astype(np.int64), w)
-        row = np.mod(row.astype(np.int64), h)
+        return np.mod(row.astype(np.int64), h), np.mod(col.astype(np.int64), w), s, t, tex
+
+    def direction_pdf(self, wi: np.ndarray, table: "PatchTable | None" = None) -> np.ndarray:
+        """Solid-angle density (N,) [1/sr] of ``sample`` from ``table`` (default: all
+        patches) at unit world directions ``wi``."""
+        table = self.table if table is None else table
+        row, col, s, t, tex = self._patch_of(wi)
+        h, w = self.grid
         p_uv = table.share[row, col] * (w * h)
         if not self.flat:
             p_uv = p_uv * self._over_mean(self._corners(row, col), s, t)
         sin_t = np.sqrt(np.maximum(0.0, 1.0 - tex[:, 2] ** 2))
         return np.where(sin_t > 0, p_uv / (2.0 * np.pi ** 2 * np.maximum(sin_t, 1e-300)), 0.0)
+
+    def smooth_radiance(self, wi: np.ndarray) -> np.ndarray:
+        """Radiance (N, 3) from unit world directions ``wi`` outside the bright patches
+        (``bright``; 0 inside them): the sky without its sun, the part of the image a final
+        gather takes over from the light samples (``lights.EnvironmentLight.gather_sky``).
+        Inside and outside are decided by the patch a direction falls in, as ``sample`` and
+        ``direction_pdf`` decide it, so the two parts add up to ``radiance`` exactly."""
+        wi = np.asarray(wi, np.float64).reshape(-1, 3)
+        if self.bright is None:
+            return self.radiance(wi)
+        row, col, _s, _t, tex = self._patch_of(wi)
+        keep = np.flatnonzero(self.bright.share[row, col] == 0)
+        value = np.zeros((len(wi), 3))
+        u, v = self._uv(tex[keep])
+        value[keep] = self.lookup_uv(u, v) * self.strength
+        return value
 
     def solid_angle_pdf(self, points, normals, wi) -> np.ndarray:
         """The density (N,) [1/sr] with which ``sample`` gives ``wi`` (N, 3) at ``points``

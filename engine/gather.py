@@ -26,7 +26,11 @@ What it computes
           (``mirrored_emission`` False);
         * on an emitter, or into the world: nothing. The emission of meshes and the world's
           radiance are direct light, which ``engine/direct.py`` computes exactly for every
-          shading point; counting them here would count them twice.
+          shading point; counting them here would count them twice. Except the smooth part
+          of an image world with a sun (``sky``: ``lights.EnvironmentLight.gather_sky``): the
+          light samples then count the sun's patches alone, and a first ray that leaves the
+          scene counts the image outside them (a gather of M x N rays estimates smooth sky
+          light far better than a pixel's few light samples, and the cache interpolates it).
         Returns E (P, 3) and, per stratum, the radiance L (P, M, N, 3) and hit distance
         r (P, M, N) (inf for a miss), from which the irradiance cache derives R_i and the
         gradients of Ward & Heckbert 1992.
@@ -198,7 +202,8 @@ def photon_guided_allocation(points, normals, photon_map, m, n, extra, k=GUIDE_P
 def final_gather(points: np.ndarray, normals: np.ndarray, offset_normals: np.ndarray,
                  estimates: RadianceEstimates, accel, surfaces, rng: np.random.Generator,
                  m: int = 8, n: int = 32, max_specular: int = 4, stats: dict | None = None,
-                 guide=None, guide_extra: float = 1.0, mirrored_emission: bool = True):
+                 guide=None, guide_extra: float = 1.0, mirrored_emission: bool = True,
+                 sky=None):
     """Indirect irradiance at ``points`` (P, 3) with unit ``normals`` (facing the viewer) by the
     stratified final gather. ``offset_normals``: geometric normals for the ray offset.
     ``surfaces``: the scene's ``surfaces.SceneSurfaces`` (normals and materials at hits; a
@@ -207,6 +212,8 @@ def final_gather(points: np.ndarray, normals: np.ndarray, offset_normals: np.nda
     through (``photon_guided_allocation``); None: one ray per stratum.
     ``mirrored_emission`` False: emitters met after a specular bounce are not counted (the
     caustic photon map holds that light, light -> specular -> here, when one is built).
+    ``sky``: radiance (K, 3) of world directions (K, 3) that the rays leaving the scene count
+    (the smooth sky the world light left to the gather, module docstring); None: nothing.
 
     Returns (E (P, 3), L (P, M, N, 3), r (P, M, N)): irradiance, per-stratum radiance (the
     mean of its rays) and hit distance of its first ray (inf for a miss). Points are taken in
@@ -217,16 +224,17 @@ def final_gather(points: np.ndarray, normals: np.ndarray, offset_normals: np.nda
     if len(points) <= step:
         return _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfaces,
                                    rng, m, n, max_specular, stats, guide, guide_extra,
-                                   mirrored_emission)
+                                   mirrored_emission, sky)
     parts = [_final_gather_chunk(points[a:a + step], normals[a:a + step],
                                  offset_normals[a:a + step], estimates, accel, surfaces, rng, m, n,
-                                 max_specular, stats, guide, guide_extra, mirrored_emission)
+                                 max_specular, stats, guide, guide_extra, mirrored_emission, sky)
              for a in range(0, len(points), step)]
     return tuple(np.concatenate(columns) for columns in zip(*parts))
 
 
 def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfaces, rng, m, n,
-                        max_specular, stats, guide, guide_extra, mirrored_emission=True):
+                        max_specular, stats, guide, guide_extra, mirrored_emission=True,
+                        sky=None):
     count = len(points)
     cells = m * n
     alloc = photon_guided_allocation(points, normals, guide, m, n, guide_extra * cells, rng=rng) \
@@ -265,6 +273,8 @@ def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfa
         hit = prim >= 0
         if bounce == 0:
             distance[ray_of[hit]] = tt[hit]
+            if sky is not None and not hit.all():
+                radiance[ray_of[~hit]] += sky(np.asarray(dirs[~hit], np.float64))
         ray_of, origins, dirs, tt, prim = ray_of[hit], origins[hit], dirs[hit], tt[hit], prim[hit]
         bu, bv = bu[hit], bv[hit]
         if throughput is not None:

@@ -102,11 +102,16 @@ class CausticEstimate:
 class FinalGather:
     """Indirect light by the stratified final gather at every asking sample (no cache).
     ``guide``: the photon map whose nearby photons steer ``guide_extra`` x M x N extra rays
-    (Jensen 1995)."""
+    (Jensen 1995). ``sky``: the smooth sky its escaping rays count where the world light left
+    it to the gather (``lights.LightSet.gather_sky``); the estimate then holds that direct
+    light too."""
 
     def __init__(self, estimates, accel, surfaces, m, n, lookups, guide=None, guide_extra=0.0,
-                 max_specular=4, mirrored_emission=True):
+                 max_specular=4, mirrored_emission=True, sky=None):
         self.estimates, self.accel, self.surfaces = estimates, accel, surfaces
+        # The world's smooth sky, counted by the rays that leave the scene
+        # (``lights.LightSet.gather_sky``; None: the light samples count all the world).
+        self.sky = sky
         self.m, self.n, self.lookups = m, n, lookups
         self.guide, self.guide_extra = guide, guide_extra
         # Specular bounces a gather ray follows, and whether it counts the emitters it meets
@@ -118,7 +123,7 @@ class FinalGather:
                             self.n, max_specular=self.max_specular, stats=stats,
                             guide=self.guide if self.guide_extra > 0 else None,
                             guide_extra=self.guide_extra,
-                            mirrored_emission=self.mirrored_emission)
+                            mirrored_emission=self.mirrored_emission, sky=self.sky)
 
     def irradiance(self, x, ns, ng, rng, stats):
         return self.gather(x, ns, ng, rng, stats)[0]

@@ -221,10 +221,13 @@ def _photons(prep: Prepared, scene, settings, tell, cancelled, artifacts):
         report.stage("radiance_estimates", estimates.stats["seconds"],
                      estimates=estimates.stats["estimates"],
                      bytes=estimates.stats.get("bytes", 0))
+        # With direct light computed, the smooth part of an image world with a sun goes to
+        # the gather (``lights.EnvironmentLight.gather_sky``): its light samples keep the sun.
+        sky = prep.lights.gather_sky() if settings.mode == "full" else None
         gather = FinalGather(estimates, prep.accel, prep.surfaces, settings.gather_m,
                              settings.gather_n, lookups, pmap, settings.gather_guided,
                              max_specular=plan.gather_specular_depth,
-                             mirrored_emission=prep.caustics is None)
+                             mirrored_emission=prep.caustics is None, sky=sky)
         prep.indirect = gather
         if plan["irradiance_cache"]:
             _cache(prep, scene, settings, gather, lookups, tell, cancelled, artifacts)
