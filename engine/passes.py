@@ -58,7 +58,10 @@ What it computes
     Combined = (DiffDir + DiffInd) DiffCol + (GlossDir + GlossInd) GlossCol + (TransDir +
     TransInd) TransCol + Emit + Env (to float rounding), Cycles' split; Lanterna's own
     Direct / Indirect / Emission split by estimator instead (emitters seen in mirrors are
-    Emission there, Glossy Direct here).
+    Emission there, Glossy Direct here). One difference from Cycles: where an image world
+    with a sun hands its smooth sky to the final gather (``lights.EnvironmentLight.
+    gather_sky``), the diffuse light of that sky comes with the cache's irradiance and is
+    filed in Diffuse Indirect (and Indirect); the sun's stays in Diffuse Direct.
 
 Cycles' light passes (issue 23, item 5)
     Each camera path carries a label, the kind of its first bounce (``DIFFUSE`` 0,
