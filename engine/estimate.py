@@ -25,7 +25,9 @@ the cache is placed over it, so a tile (render border) renders as its part of th
     =====================  =================================================================
     count                  prediction
     =====================  =================================================================
-    camera rays            B S (exact; every camera ray is assumed to hit, as in a room)
+    camera rays            B S (exact; every camera ray is assumed to hit, as in a room);
+                           with adaptive sampling (``noise_threshold`` > 0) the bound
+                           B S (1 + ``ADAPTIVE_BUDGET``), and every count below with it
     look-ups               B min(L, S), L = ``photon_lookups`` or ``auto_lookups(F)`` (exact when
                            every camera ray hits a diffuse surface)
     shadow rays            B S (D + K [sampled lights exist]) with D delta lights and K light
@@ -187,7 +189,7 @@ from .passes import parse_passes
 from .photons import auto_photon_count
 from .plan import make_plan
 from .scene import AreaLight, PointLight, SceneError, SpotLight, SunLight
-from .settings import RenderSettings, auto_lookups, block_side
+from .settings import ADAPTIVE_BUDGET, RenderSettings, auto_lookups, block_side
 from .textures import lookups_per_hit
 from .shadow_photons import (AUTO_SPACING, DEFAULT_K, DEFAULT_MARGIN, MAX_AUTO_COUNT,
                              MIN_AUTO_COUNT, neighbours_queried)
@@ -912,6 +914,8 @@ def estimate_from_facts(facts: SceneFacts, settings, rates: Rates | None = None,
     if not camera:
         return _finish(stages, plan, facts, s, rates, W, available, r["texture_lookup"])
     camera_rays = shaded * spp
+    if s.noise_threshold > 0 and spp >= 2:
+        camera_rays *= 1.0 + ADAPTIVE_BUDGET      # adaptive sampling: at most this many more
     depth = s.max_specular_depth if plan["specular"] else 0
     spec = min(facts.specular_share, 0.999)
     specular_rays = camera_rays * sum(spec ** d for d in range(1, depth + 1))

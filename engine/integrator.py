@@ -61,6 +61,15 @@ What it computes
         pixel is otherwise decided by how many samples land on an emitter 100x brighter than
         its surroundings.
 
+Adaptive sampling (``noise_threshold`` > 0; ``final`` sets Cycles' default 0.01):
+``shade_adaptive`` shades a block's samples in two halves, estimates each pixel's noise from
+their difference (Cycles' estimate, taken as an RMS over the pixel's 3 x 3 neighbourhood)
+and shades the noisy pixels again with 1, 3, 7 or 15 x the samples more
+(``settings.ADAPTIVE_LEVELS``), at most the block's samples again in all
+(``ADAPTIVE_BUDGET``); a pixel's samples are then consecutive points of one scrambled (0,
+2)-sequence (``sampling.sobol_02``). On the yard at ``final`` the error falls from 1.7-1.9 %
+to 1.0-1.1 %, most of the noise left being at edges.
+
 Blocks (``settings.camera_blocks``) are square parts of the full frame (64 x 64 pixels at
 16 spp), each with its own random stream from (seed, block number): they run on the thread
 pool (embreex and numpy release the GIL) and a fixed seed gives the same picture whatever the
@@ -83,7 +92,8 @@ from .bsdf import (RoughDiffuseHits, layer_diffuse_factor, lobe_shares, reflecti
 from .direct import direct_terms, irradiance_from_terms
 from .passes import DIFFUSE, GLOSSY, LIGHT_PASS_NAMES, TRANSMISSION, LightSums
 from .lights import ray_visible, seen_light_radiance
-from .settings import RenderSettings, camera_blocks
+from .settings import (ADAPTIVE_BUDGET, ADAPTIVE_LEVELS, TARGET_BATCH_SAMPLES,
+                       RenderSettings, camera_blocks)
 from .textures import STRAIGHT_ON, ray_after_bounce
 
 # What each camera batch counts (rays, seconds of threads, look-ups); summed over batches.
@@ -92,7 +102,8 @@ BATCH_COUNTERS = ("camera_rays", "shadow_rays", "specular_rays", "glossy_rays", 
                   "query_seconds", "estimate_seconds", "cache_interpolated", "cache_gathered",
                   "cache_local_records", "cache_local_interpolated", "gather_rays",
                   "gather_points", "shadow_rays_saved", "shadow_lit", "shadow_umbra",
-                  "shadow_penumbra", "edge_pixels", "edge_rays")
+                  "shadow_penumbra", "edge_pixels", "edge_rays", "adaptive_pixels",
+                  "adaptive_samples")
 # Above this many materials the per-(pixel, material) histogram of the diffuse term gets big.
 MAX_HISTOGRAM_MATERIALS = 64
 EDGE_SAMPLES_FACTOR = 16    # an emitter edge's pixel: this x samples for its emission
@@ -290,7 +301,7 @@ def render_camera(context: CameraContext, wanted_parts, pool, progress=None, can
     def submit():
         while queue and len(pending) < 2 * settings.worker_count:
             block = queue.pop()
-            future = pool.submit(shade_block, context, block.index, block.pixels, block.camera)
+            future = pool.submit(shade_adaptive, context, block)
             pending[future] = block
 
     submit()
@@ -321,12 +332,18 @@ def render_camera(context: CameraContext, wanted_parts, pool, progress=None, can
     return out
 
 
-def shade_block(context: CameraContext, batch: int, pixels: int, camera):
+def shade_block(context: CameraContext, batch: int, pixels: int, camera, subset=None,
+                sequence=None):
     """Radiance for the ``pixels`` of one block (``camera``: the frame's camera bordered to
     it), mean over their samples, by kind: (3, pixels, 3) for emission, direct light and
     indirect light (in ``photon-map`` mode: the whole estimate); their sum is Combined. Also
     the batch's counters and, with ``track_usage``, (pixels, 2) shares of samples
-    interpolated from cache records and gathered afresh."""
+    interpolated from cache records and gathered afresh. ``subset``: only these of the
+    block's pixels (row-major indices; the results have one row each, in their order): the
+    extra samples of adaptive sampling (``shade_adaptive``). ``sequence``: (block index,
+    first sample): the samples' positions in their pixels are the (0, 2)-sequence's points
+    from that index on, scrambled per pixel of that block (``sampling.sobol_02``), instead
+    of a jittered set of their own."""
     scene, surfaces, accel = context.scene, context.surfaces, context.accel
     settings, ray_log, photon = context.settings, context.ray_log, context.indirect
     materials = surfaces.materials
@@ -341,7 +358,22 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
     started = time.perf_counter()
     rng = sampling.rng_for(settings.seed, sampling.STREAM_CAMERA, batch)
     spp = settings.samples
-    origins, directions, tmax = pixel_rays(camera, 0, pixels, spp, rng, settings.filter_width)
+    block_pixels = np.arange(pixels) if subset is None else np.asarray(subset, np.int64)
+    positions = None
+    if sequence is not None:
+        block_index, first = sequence
+        scramble = sampling.rng_for(settings.seed, sampling.STREAM_SEQUENCE, block_index) \
+            .integers(0, 1 << 32, (pixels, 2), dtype=np.uint32)[block_pixels]
+        index = first + np.arange(spp)
+        positions = sampling.sobol_02(np.tile(index, len(block_pixels)),
+                                      np.repeat(scramble, spp, axis=0))
+    if subset is None and positions is None:
+        origins, directions, tmax = pixel_rays(camera, 0, pixels, spp, rng,
+                                               settings.filter_width)
+    else:
+        origins, directions, tmax = pixel_rays(camera, 0, 0, spp, rng, settings.filter_width,
+                                               pixels=block_pixels, positions=positions)
+    pixels = len(block_pixels)
     count = len(origins)
     # Sums of the samples' radiance per pixel, by kind (the Emission, Direct and Indirect
     # passes; Combined is their sum): every contribution goes straight to its pixel.
@@ -383,7 +415,7 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
     edge_pixels, own_emission = None, None
     if context.edges is not None:
         x0, y0, x1, y1 = camera.border
-        row, col = np.divmod(np.arange(pixels), x1 - x0)
+        row, col = np.divmod(block_pixels, x1 - x0)
         marked = context.edges[camera.resolution[1] - 1 - (y1 - 1 - row), x0 + col]
         if marked.any():
             edge_pixels = np.flatnonzero(marked)
@@ -467,7 +499,8 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
                                   {**(path_values or {}), "Ray Length": t_hit})
         if depth == 0 and not materials.constant_per_material:
             t0 = time.perf_counter()
-            supersample_textures(context, camera, batch, surface, prim, rays, spp, stats)
+            supersample_textures(context, camera, batch, surface, prim, rays, spp, stats,
+                                 subset)
             stats["trace_seconds"] += time.perf_counter() - t0
 
         if materials.has_emission:
@@ -655,7 +688,7 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
                 path_kind = kinds[idx]
 
     if edge_pixels is not None:
-        seen, traced = edge_emission(context, camera, batch, edge_pixels,
+        seen, traced = edge_emission(context, camera, batch, block_pixels[edge_pixels],
                                      split=light is not None)
         if light is not None:
             seen, seen_world = seen
@@ -669,6 +702,108 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera):
         usage /= spp
     stats["seconds"] = time.perf_counter() - started
     return parts, stats, usage, None if light is None else light.stacked()
+
+
+def shade_adaptive(context: CameraContext, block):
+    """``shade_block`` for one block (``settings.CameraBlock``), with adaptive sampling where
+    ``noise_threshold`` > 0 (Cycles' adaptive sampling, in one refining step): the block's
+    samples in two halves, each pixel's noise estimated from their difference as Cycles
+    does (sum over the channels of |I - A| over sqrt(sum of I), I the mean of all samples,
+    A of one half), and the pixels above the threshold shaded again with ``ADAPTIVE_LEVELS``
+    x samples more, the least level that brings their noise to the threshold if noise falls
+    as 1 / sqrt(samples) (the largest where none does); where that would take more than
+    ``ADAPTIVE_BUDGET`` x the block's samples, the highest level is lowered until all fit
+    and what is left lifts the noisiest a level (many pixels a little better rather than a
+    few perfect). A pixel's samples,
+    halves and extra ones, are consecutive points of one (0, 2)-sequence scrambled for it
+    (``sampling.sobol_02``), so all of them together are as well spread over the pixel as
+    one stratified set: drawn as independent jittered sets instead, 16 + 48 samples left the
+    yard's edge pixels 1.3x noisier than 64 in one set. Each pixel is the mean of all its
+    samples (as in Cycles, the extra samples go where the first ones happened to disagree,
+    a bias that falls with their number). Returns what ``shade_block`` returns."""
+    settings = context.settings
+    spp = settings.samples
+    if settings.noise_threshold <= 0 or spp < 2:
+        return shade_block(context, block.index, block.pixels, block.camera)
+    half = spp // 2
+    runs, counts = [], np.zeros(block.pixels)
+    for part, samples in enumerate((half, spp - half)):
+        run = shade_block(replace(context, settings=replace(settings, samples=samples)),
+                          block.index + (part << 32), block.pixels, block.camera,
+                          sequence=(block.index, part * half))
+        runs.append((None, samples, run))
+    image_a = runs[0][2][0].sum(axis=0)
+    image_b = runs[1][2][0].sum(axis=0)
+    mean = (half * image_a + (spp - half) * image_b) / spp
+    # Cycles' estimate at each pixel, then its RMS over the pixel's 3 x 3 neighbourhood: a
+    # pixel's own samples then have little say in whether it gets more (judged by its own
+    # estimate alone, the pixels whose samples happened to come out dark looked noisier
+    # and only they were corrected: +0.35 % on the test's box yard).
+    width = block.camera.border[2] - block.camera.border[0]
+    own = np.abs(mean - image_a).sum(axis=1) / (1e-4 + np.sqrt(np.maximum(mean.sum(axis=1),
+                                                                           0.0)))
+    noise = np.sqrt(_box_3x3((own ** 2).reshape(-1, width)).reshape(-1))
+    # Extra samples that bring a pixel's noise to the threshold, in levels of ``spp``.
+    need = spp * ((noise / settings.noise_threshold) ** 2 - 1.0)
+    levels = np.asarray(ADAPTIVE_LEVELS) * spp
+    level = np.minimum(np.searchsorted(levels, need), len(levels) - 1)
+    wanted = np.flatnonzero(noise > settings.noise_threshold)
+    wanted = wanted[np.argsort(-noise[wanted], kind="stable")]
+    budget = ADAPTIVE_BUDGET * spp * block.pixels
+    # Over the budget: the highest level lowered until every wanted pixel fits (many pixels
+    # a little better, not a few perfect), then the noisiest first.
+    for cap in range(len(levels) - 1, -1, -1):
+        extra = levels[np.minimum(level[wanted], cap)]
+        if extra.sum() <= budget:
+            break
+    if cap < len(levels) - 1:
+        # What the cap leaves of the budget lifts the noisiest a level further.
+        lifted = levels[np.minimum(level[wanted], cap + 1)]
+        room = np.cumsum(lifted - extra) <= budget - extra.sum()
+        extra = np.where(room, lifted, extra)
+    keep = np.cumsum(extra) <= budget
+    wanted, extra = wanted[keep], extra[keep]
+    for step, samples in enumerate(levels):
+        chosen = np.sort(wanted[extra == samples])
+        chunk = max(1, TARGET_BATCH_SAMPLES // int(samples))
+        for start in range(0, len(chosen), chunk):
+            subset = chosen[start:start + chunk]
+            run = shade_block(replace(context, settings=replace(settings, samples=int(samples))),
+                              block.index + ((2 + step) << 32) + (start << 40), block.pixels,
+                              block.camera, subset=subset, sequence=(block.index, spp))
+            runs.append((subset, int(samples), run))
+    # Every pixel's mean over all its samples.
+    parts = np.zeros((3, block.pixels, 3))
+    usage = None if runs[0][2][2] is None else np.zeros((block.pixels, 2))
+    light = None if runs[0][2][3] is None else np.zeros(runs[0][2][3].shape)
+    stats = dict.fromkeys(BATCH_COUNTERS, 0)
+    stats["seconds"] = 0.0
+    for subset, samples, (r_parts, r_stats, r_usage, r_light) in runs:
+        at = slice(None) if subset is None else subset
+        parts[:, at] += samples * r_parts
+        counts[at] += samples
+        if usage is not None:
+            usage[at] += samples * r_usage
+        if light is not None:
+            light[:, at] += samples * r_light
+        for key in BATCH_COUNTERS:
+            stats[key] += r_stats.get(key, 0)
+        stats["seconds"] += r_stats["seconds"]
+    stats["adaptive_pixels"] = len(wanted)
+    stats["adaptive_samples"] = int(extra.sum())
+    parts /= counts[None, :, None]
+    if usage is not None:
+        usage /= counts[:, None]
+    if light is not None:
+        light /= counts[None, :, None]
+    return parts, stats, usage, light
+
+
+def _box_3x3(values: np.ndarray) -> np.ndarray:
+    """The mean of each (H, W) value's 3 x 3 neighbourhood (edges repeated)."""
+    h, w = values.shape
+    padded = np.pad(values, 1, mode="edge")
+    return sum(padded[i:i + h, j:j + w] for i in range(3) for j in range(3)) / 9.0
 
 
 def emitter_edges(scene, accel, surfaces, filter_width: float):
@@ -749,7 +884,7 @@ def _seen_emission(scene, accel, surfaces, origins, directions, tmax, split=Fals
 
 
 def supersample_textures(context: CameraContext, camera, batch: int, surface, prim, rays,
-                         spp: int, stats: dict) -> None:
+                         spp: int, stats: dict, subset=None) -> None:
     """At primary hits on textured materials, the diffuse reflectance averaged over the hit's
     own look-up and ``TEXTURE_SUPERSAMPLES`` more: extra rays through the same pixel (drawn
     from the pixel filter, ``STREAM_TEXTURE``) that meet the same material; only their
@@ -757,7 +892,8 @@ def supersample_textures(context: CameraContext, camera, batch: int, surface, pr
     a sample instead of more shaded samples: the anti-aliasing noise of texture edges falls
     as if the pixel had (1 + K) x spp samples. Where the light varies inside the pixel across
     a texture edge this averages the texture over the pixel's part on that material (a
-    second-order difference from the pixel filter's exact integral)."""
+    second-order difference from the pixel filter's exact integral). ``subset``: the block's
+    pixels the batch shades (``shade_block``), None for all of them."""
     textured = np.flatnonzero(context.surfaces.materials.textured[surface.material])
     k = TEXTURE_SUPERSAMPLES
     if len(textured) == 0 or k == 0:
@@ -773,7 +909,8 @@ def supersample_textures(context: CameraContext, camera, batch: int, surface, pr
     grid = sampling.jittered_2d(len(unique), spp * k, rng).reshape(len(unique), spp, k, 2)
     positions = grid[slot.reshape(-1), rays[textured] % spp]                # (T, K, 2)
     origins, directions, tmax = pixel_rays(camera, 0, 0, k, rng, context.settings.filter_width,
-                                           pixels=pixel, positions=positions)
+                                           pixels=pixel if subset is None else subset[pixel],
+                                           positions=positions)
     _t, p2, u2, v2 = context.accel.intersect(origins, directions, tmax)
     stats["camera_rays"] += len(origins)
     owner = np.repeat(textured, k)

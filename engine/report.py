@@ -96,6 +96,8 @@ class RenderReport:
                    cache_local_records=t["cache_local_records"],
                    cache_local_interpolated=t["cache_local_interpolated"],
                    edge_pixels=t["edge_pixels"], edge_rays=t["edge_rays"],
+                   adaptive_pixels=t["adaptive_pixels"],
+                   adaptive_samples=t["adaptive_samples"],
                    shadow_rays_saved=t["shadow_rays_saved"],
                    shadow_classes={"lit": t["shadow_lit"], "umbra": t["shadow_umbra"],
                                    "penumbra": t["shadow_penumbra"]},

@@ -32,6 +32,7 @@ STREAM_EDGE = 5          # the camera's extra samples of emitter edges (pipeline
 STREAM_CAUSTIC = 6       # the caustic photon map's pilot and photons (photons.py)
 # (7: shadow_photons.STREAM_SHADOW_PHOTON)
 STREAM_TEXTURE = 8       # the camera's extra texture look-ups per sample (integrator.py)
+STREAM_SEQUENCE = 9      # the per-pixel scrambles of adaptive sampling's sequence (integrator.py)
 
 
 def rng_for(seed: int, stream: int, batch: int = 0) -> np.random.Generator:
@@ -82,6 +83,31 @@ def jittered_2d(groups: int, count: int, rng: np.random.Generator) -> np.ndarray
     u[..., 0] = (cells % b + u[..., 0]) / max(b, 1)
     u[..., 1] = (cells // b + u[..., 1]) / a
     return u
+
+
+def sobol_02(index: np.ndarray, scramble: np.ndarray) -> np.ndarray:
+    """Points (N, 2) in [0, 1)^2 of the (0, 2)-sequence at integer ``index`` (N,): Sobol's
+    first two dimensions (van der Corput's radical inverse, and the one whose generator is
+    Pascal's triangle mod 2), each XOR-ed with ``scramble`` (N, 2) uint32 (a random digit
+    scramble, which keeps the sequence's stratification: every run of 2^k points starting
+    at a multiple of 2^k has one point in each of the 2^k boxes of every shape 2^-a x 2^-b,
+    a + b = k). A pixel's samples 0..2^k - 1 are thus as well spread as a jittered grid, and
+    samples added later (adaptive sampling) keep the whole set so."""
+    i = np.asarray(index, np.uint64).astype(np.uint32)
+    x = np.zeros(len(i), np.uint32)
+    y = np.zeros(len(i), np.uint32)
+    v = np.uint32(1 << 31)
+    bits = int(i.max()).bit_length() if len(i) else 0
+    for bit in range(bits):
+        on = ((i >> np.uint32(bit)) & np.uint32(1)).astype(bool)
+        x[on] ^= np.uint32(1 << (31 - bit))
+        y[on] ^= v
+        v ^= v >> np.uint32(1)
+    scramble = np.asarray(scramble, np.uint32).reshape(-1, 2)
+    x ^= scramble[:, 0]
+    y ^= scramble[:, 1]
+    out = np.stack([x, y], axis=1).astype(np.float64) * (1.0 / 4294967296.0)
+    return np.minimum(out, 1.0 - 2.0 ** -53)
 
 
 def pixel_stratified(rays: np.ndarray, spp: int, count: int, rng: np.random.Generator

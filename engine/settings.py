@@ -21,6 +21,9 @@ Settings (``RenderSettings``; units in brackets)
     mode                   full      ``full`` (exact direct + indirect light) or ``photon-map``
                                      (all light from the photon map, seen directly; seed 9.5)
     samples                16        camera samples per pixel (1-65536)
+    noise_threshold        0.0       adaptive sampling: a pixel whose noise (Cycles' estimate,
+                                     ``integrator.shade_adaptive``) is above it gets 2-8x the
+                                     samples (a block at most twice its samples); 0 = off
     light_samples          4         samples per shading point shared by area/mesh/world lights
     bounces                128       most bounces of light; 0 = direct light only. Photon paths
                                      end after this many bounces (counted in the report); 128
@@ -68,7 +71,8 @@ from .scene import SceneError
 
 __all__ = ["Setting", "RenderSettings", "SETTINGS", "PRESETS", "MODES",
            "INDIRECT_METHODS", "PHOTON_FILTERS", "CONE_FILTER_K", "MAX_PHOTONS",
-           "LOOKUP_BUDGET", "auto_lookups", "TARGET_BATCH_SAMPLES", "CameraBlock",
+           "LOOKUP_BUDGET", "auto_lookups", "TARGET_BATCH_SAMPLES", "ADAPTIVE_LEVELS",
+           "ADAPTIVE_BUDGET", "CameraBlock",
            "block_side", "camera_blocks"]
 
 
@@ -125,7 +129,8 @@ FILTER_CHOICES = (
 PRESET_CHOICES = (
     ("custom", "Custom", "Use the settings below"),
     ("preview", "Preview", "Fast: 4 spp, 200k photons, gather 6x24, cache error 0.3"),
-    ("final", "Final", "16 spp, 1M photons, gather 12x48, cache error 0.1"),
+    ("final", "Final", "16 spp (adaptive, noise threshold 0.01), 1M photons, gather 12x48, "
+                       "cache error 0.1"),
 )
 MODES = tuple(c[0] for c in MODE_CHOICES)
 INDIRECT_METHODS = tuple(c[0] for c in INDIRECT_CHOICES)
@@ -135,12 +140,13 @@ MAX_PHOTONS = 50_000_000
 INT_MAX = 2 ** 31 - 1
 
 # Quality presets (issue 4): photons, gather M x N, cache error a, samples. Measured time and
-# error on the seed's scenes: docs/performance.md.
+# error on the seed's scenes: docs/performance.md. Final's noise threshold is Cycles' default
+# (0.01), not fitted to any scene of ours.
 PRESETS = {
     "preview": dict(samples=4, light_samples=2, photons=200_000, gather_m=6, gather_n=24,
                     cache_error=0.3, indirect="cache"),
     "final": dict(samples=16, light_samples=8, photons=1_000_000, gather_m=12, gather_n=48,
-                  cache_error=0.1, indirect="cache"),
+                  cache_error=0.1, indirect="cache", noise_threshold=0.01),
 }
 
 
@@ -151,6 +157,11 @@ class RenderSettings:
     mode: str = _setting("full", "Mode", "How light is computed", choices=MODE_CHOICES)
     samples: int = _setting(16, "Samples", "Camera samples per pixel", 1, 65536,
                             soft_max=4096)
+    noise_threshold: float = _setting(0.0, "Noise Threshold",
+                                      "Adaptive sampling: pixels whose noise (Cycles' "
+                                      "estimate) is above this get 2-8x the samples, within "
+                                      "twice a block's samples in all; 0 = off", 0.0, 1.0,
+                                      soft_max=0.1, precision=4)
     light_samples: int = _setting(4, "Light Samples",
                                   "Samples per area/mesh/world light per camera hit",
                                   1, 65536, soft_max=256)
@@ -265,6 +276,12 @@ def auto_lookups(pixels: int, samples: int) -> int:
 
 # -- The camera's blocks ---------------------------------------------------------------------------
 TARGET_BATCH_SAMPLES = 1 << 16
+# Adaptive sampling (``integrator.shade_adaptive``): a noisy pixel's extra samples, in
+# multiples of the samples (it ends with 2, 4, 8 or 16 x as many: whole runs of the (0, 2)-
+# sequence), and the most extra samples a block may take, in multiples of its samples (a
+# block of noise everywhere costs at most twice its time).
+ADAPTIVE_LEVELS = (1, 3, 7, 15)
+ADAPTIVE_BUDGET = 1.0
 
 
 @dataclass

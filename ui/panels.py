@@ -145,6 +145,7 @@ class LANTERNA_RENDER_PT_sampling(LanternaRenderPanel, bpy.types.Panel):
         layout.prop(settings, "mode")
         col = layout.column(align=True)
         _prop(col, settings, "samples", fixed)
+        _prop(col, settings, "noise_threshold", fixed)
         sub = col.column(align=True)
         sub.active = settings.mode == 'FULL'
         _prop(sub, settings, "light_samples", fixed, text="Light Samples")
