@@ -22,8 +22,8 @@ Settings (``RenderSettings``; units in brackets)
                                      (all light from the photon map, seen directly; seed 9.5)
     samples                16        camera samples per pixel (1-65536)
     noise_threshold        0.0       adaptive sampling: a pixel whose noise (Cycles' estimate,
-                                     ``integrator.shade_adaptive``) is above it gets 2-8x the
-                                     samples (a block at most twice its samples); 0 = off
+                                     ``integrator.shade_adaptive``) is above it gets 2-16x the
+                                     samples (a block at most 1.5x its samples); 0 = off
     light_samples          4         samples per shading point shared by area/mesh/world lights
     bounces                128       most bounces of light; 0 = direct light only. Photon paths
                                      end after this many bounces (counted in the report); 128
@@ -159,8 +159,8 @@ class RenderSettings:
                             soft_max=4096)
     noise_threshold: float = _setting(0.0, "Noise Threshold",
                                       "Adaptive sampling: pixels whose noise (Cycles' "
-                                      "estimate) is above this get 2-8x the samples, within "
-                                      "twice a block's samples in all; 0 = off", 0.0, 1.0,
+                                      "estimate) is above this get 2-16x the samples, within "
+                                      "1.5x a block's samples in all; 0 = off", 0.0, 1.0,
                                       soft_max=0.1, precision=4)
     light_samples: int = _setting(4, "Light Samples",
                                   "Samples per area/mesh/world light per camera hit",
@@ -279,9 +279,9 @@ TARGET_BATCH_SAMPLES = 1 << 16
 # Adaptive sampling (``integrator.shade_adaptive``): a noisy pixel's extra samples, in
 # multiples of the samples (it ends with 2, 4, 8 or 16 x as many: whole runs of the (0, 2)-
 # sequence), and the most extra samples a block may take, in multiples of its samples (a
-# block of noise everywhere costs at most twice its time).
+# block of noise everywhere costs at most 1.5x its time).
 ADAPTIVE_LEVELS = (1, 3, 7, 15)
-ADAPTIVE_BUDGET = 1.0
+ADAPTIVE_BUDGET = 0.5
 
 
 @dataclass

@@ -84,7 +84,8 @@ def regions(image, luminance: bool = False) -> np.ndarray:
 
 def lanterna_image(bpy, seed: int, samples: int | None = None):
     """(exported scene, image (H, W, 3)) of the current scene by Lanterna at ``final``'s
-    settings (``samples`` a pixel where given), checked finite."""
+    settings (``samples`` a pixel where given, then that many everywhere: no adaptive
+    sampling on top of a count chosen for the test), checked finite."""
     from lanterna.engine.blender.export import export_scene
     from lanterna.engine.pipeline import RenderSettings, render
     from lanterna.engine.settings import PRESETS
@@ -92,7 +93,8 @@ def lanterna_image(bpy, seed: int, samples: int | None = None):
     exported = export_scene(bpy.context.evaluated_depsgraph_get())
     # (``RenderSettings(preset="final", samples=...)`` would keep the preset's 16 samples.)
     settings = RenderSettings(seed=seed, preset="final") if samples is None else \
-        RenderSettings(**{**PRESETS["final"], "samples": samples, "seed": seed})
+        RenderSettings(**{**PRESETS["final"], "samples": samples, "seed": seed,
+                          "noise_threshold": 0.0})
     image = np.asarray(render(exported, settings).image)
     assert np.all(np.isfinite(image))
     return exported, image
