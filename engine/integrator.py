@@ -900,13 +900,11 @@ def supersample_textures(context: CameraContext, camera, batch: int, surface, pr
     rng = sampling.rng_for(context.settings.seed, sampling.STREAM_TEXTURE, batch)
     pixel = rays[textured] // spp
     # The pixel's spp x K extra positions are one set, stratified over the pixel in two
-    # dimensions (``sampling.jittered_2d``); each sample takes its own K of them. The pixel's
-    # texture then averages over a stratified set of (1 + K) x spp positions, not spp sets of
-    # K drawn independently (DiffCol's seed-to-seed noise on the textured room's floor:
-    # 1.31 % with independent sets).
-    unique, slot = np.unique(pixel, return_inverse=True)
-    grid = sampling.jittered_2d(len(unique), spp * k, rng).reshape(len(unique), spp, k, 2)
-    positions = grid[slot.reshape(-1), rays[textured] % spp]                # (T, K, 2)
+    # dimensions (``sampling.pixel_stratified``'s jittered set); each sample takes its own K
+    # of them. The pixel's texture then averages over a stratified set of (1 + K) x spp
+    # positions, not spp sets of K drawn independently (DiffCol's seed-to-seed noise on the
+    # textured room's floor: 1.31 % with independent sets).
+    positions = sampling.pixel_stratified(rays[textured], spp, k, rng)[0]   # (T, K, 2)
     origins, directions, tmax = pixel_rays(camera, 0, 0, k, rng, context.settings.filter_width,
                                            pixels=pixel if subset is None else subset[pixel],
                                            positions=positions)

@@ -3,7 +3,9 @@
 What it computes
     Random streams that depend only on (seed, purpose, batch) so results do not depend on
     thread scheduling; stratified 2-D samples per group (jittered grid when the count is a
-    square, Latin hypercube otherwise); warps from the unit square to the disk, triangle,
+    square, Latin hypercube otherwise); numbers stratified over a pixel's samples
+    (``pixel_stratified``); the scrambled (0, 2)-sequence (``sobol_02``, Sobol 1967's first
+    two dimensions) for adaptive sampling; warps from the unit square to the disk, triangle,
     cosine hemisphere, sphere and cone; orthonormal frames around normals; importance
     sampling of the Blackman-Harris pixel filter.
 
