@@ -27,7 +27,8 @@ the cache is placed over it, so a tile (render border) renders as its part of th
     =====================  =================================================================
     camera rays            B S (exact; every camera ray is assumed to hit, as in a room);
                            with adaptive sampling (``noise_threshold`` > 0) the bound
-                           B S (1 + ``ADAPTIVE_BUDGET``), and every count below with it
+                           B S (1 + ``ADAPTIVE_BUDGET``), and the counts of the camera's hits
+                           with it (shadow, specular rays, light samples; not the look-ups)
     look-ups               B min(L, S), L = ``photon_lookups`` or ``auto_lookups(F)`` (exact when
                            every camera ray hits a diffuse surface)
     shadow rays            B S (D + K [sampled lights exist]) with D delta lights and K light

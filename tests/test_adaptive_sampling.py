@@ -19,7 +19,6 @@ no adaptive pass at all (ratio 1).
 """
 import numpy as np
 
-from lanterna.engine.environment import Environment  # noqa: F401  (the world module loads)
 from lanterna.engine.pipeline import render
 from lanterna.engine.sampling import sobol_02
 from lanterna.engine.scene import World
