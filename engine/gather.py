@@ -31,7 +31,10 @@ What it computes
           light samples then count the sun's patches alone, and a first ray that leaves the
           scene counts the image outside them (a gather of M x N rays estimates smooth sky
           light far better than a pixel's few light samples, and the cache interpolates it).
-        Returns E (P, 3) and, per stratum, the radiance L (P, M, N, 3) and hit distance
+          That sky light is direct light at the gather point: with ``split_sky`` it comes in
+          three channels of its own (C = 6), which the light passes file as Cycles does
+          (Diffuse Direct, ``engine/passes.py``).
+        Returns E (P, C) and, per stratum, the radiance L (P, M, N, C) and hit distance
         r (P, M, N) (inf for a miss), from which the irradiance cache derives R_i and the
         gradients of Ward & Heckbert 1992.
 
@@ -203,7 +206,7 @@ def final_gather(points: np.ndarray, normals: np.ndarray, offset_normals: np.nda
                  estimates: RadianceEstimates, accel, surfaces, rng: np.random.Generator,
                  m: int = 8, n: int = 32, max_specular: int = 4, stats: dict | None = None,
                  guide=None, guide_extra: float = 1.0, mirrored_emission: bool = True,
-                 sky=None):
+                 sky=None, split_sky: bool = False):
     """Indirect irradiance at ``points`` (P, 3) with unit ``normals`` (facing the viewer) by the
     stratified final gather. ``offset_normals``: geometric normals for the ray offset.
     ``surfaces``: the scene's ``surfaces.SceneSurfaces`` (normals and materials at hits; a
@@ -214,8 +217,11 @@ def final_gather(points: np.ndarray, normals: np.ndarray, offset_normals: np.nda
     caustic photon map holds that light, light -> specular -> here, when one is built).
     ``sky``: radiance (K, 3) of world directions (K, 3) that the rays leaving the scene count
     (the smooth sky the world light left to the gather, module docstring); None: nothing.
+    ``split_sky``: that sky's light in channels of its own (C = 6: the three channels of the
+    light the rays met at surfaces, then the three of the sky they saw, which is direct
+    light at the gather point: Cycles' Diffuse Direct pass), else added in (C = 3).
 
-    Returns (E (P, 3), L (P, M, N, 3), r (P, M, N)): irradiance, per-stratum radiance (the
+    Returns (E (P, C), L (P, M, N, C), r (P, M, N)): irradiance, per-stratum radiance (the
     mean of its rays) and hit distance of its first ray (inf for a miss). Points are taken in
     chunks of at most about ``GATHER_RAYS_PER_CALL`` rays, so memory stays bounded however
     many points a caller passes (75M rays in one call was killed for memory)."""
@@ -224,17 +230,18 @@ def final_gather(points: np.ndarray, normals: np.ndarray, offset_normals: np.nda
     if len(points) <= step:
         return _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfaces,
                                    rng, m, n, max_specular, stats, guide, guide_extra,
-                                   mirrored_emission, sky)
+                                   mirrored_emission, sky, split_sky)
     parts = [_final_gather_chunk(points[a:a + step], normals[a:a + step],
                                  offset_normals[a:a + step], estimates, accel, surfaces, rng, m, n,
-                                 max_specular, stats, guide, guide_extra, mirrored_emission, sky)
+                                 max_specular, stats, guide, guide_extra, mirrored_emission, sky,
+                                 split_sky)
              for a in range(0, len(points), step)]
     return tuple(np.concatenate(columns) for columns in zip(*parts))
 
 
 def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfaces, rng, m, n,
                         max_specular, stats, guide, guide_extra, mirrored_emission=True,
-                        sky=None):
+                        sky=None, split_sky=False):
     count = len(points)
     cells = m * n
     alloc = photon_guided_allocation(points, normals, guide, m, n, guide_extra * cells, rng=rng) \
@@ -256,6 +263,8 @@ def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfa
     origin_normals = offset_normals.astype(np.float64)[point_of]
     total_rays = len(stratum)
     radiance = np.zeros((total_rays, 3))
+    # The sky the first rays see, in channels of its own when asked (``split_sky``).
+    sky_radiance = np.zeros((total_rays, 3)) if split_sky and sky is not None else radiance
     distance = np.full(total_rays, np.inf)
     origins = accel.offset_origins(origin_points, origin_normals, dirs)
     ray_of = np.arange(total_rays)
@@ -274,7 +283,7 @@ def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfa
         if bounce == 0:
             distance[ray_of[hit]] = tt[hit]
             if sky is not None and not hit.all():
-                radiance[ray_of[~hit]] += sky(np.asarray(dirs[~hit], np.float64))
+                sky_radiance[ray_of[~hit]] += sky(np.asarray(dirs[~hit], np.float64))
         ray_of, origins, dirs, tt, prim = ray_of[hit], origins[hit], dirs[hit], tt[hit], prim[hit]
         bu, bv = bu[hit], bv[hit]
         if throughput is not None:
@@ -362,10 +371,13 @@ def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfa
         stats["gather_rays"] = stats.get("gather_rays", 0) + rays
         stats["gather_points"] = stats.get("gather_points", 0) + count
         stats["gather_seconds"] = stats.get("gather_seconds", 0.0) + time.perf_counter() - t0
-    per_stratum = np.zeros((count * cells, 3))
-    for c in range(3):
+    if sky_radiance is not radiance:
+        radiance = np.concatenate([radiance, sky_radiance], axis=1)
+    channels = radiance.shape[1]
+    per_stratum = np.zeros((count * cells, channels))
+    for c in range(channels):
         per_stratum[:, c] = np.bincount(stratum, weights=radiance[:, c], minlength=count * cells)
     per_stratum /= alloc.reshape(-1, 1)
-    per_stratum = per_stratum.reshape(count, m, n, 3)
+    per_stratum = per_stratum.reshape(count, m, n, channels)
     irradiance = np.pi / cells * per_stratum.sum(axis=(1, 2))
     return irradiance, per_stratum, distance[first].reshape(count, m, n)

@@ -2,10 +2,14 @@
 of the irradiance cache's records.
 
 What it computes
-    Each estimator answers ``irradiance(x, ns, ng, rng, stats)`` -> E (N, 3) [W/m^2]: the
+    Each estimator answers ``irradiance(x, ns, ng, rng, stats)`` -> E (N, C) [W/m^2]: the
     indirect irradiance at points ``x`` with shading normals ``ns`` (facing the viewer) and
     geometric normals ``ng`` (for ray offsets); ``lookups`` says how many of a pixel's camera
-    samples ask it (their value stands for the others).
+    samples ask it (their value stands for the others). ``channels`` C is 3 (RGB), or 6 where
+    the gather counts the smooth sky of an image world with a sun
+    (``lights.LightSet.gather_sky``): RGB of the light met at surfaces (indirect), then RGB of
+    the sky (direct light, which the light passes file as Diffuse Direct); the cache's records
+    hold both, and every decision about them (placement, the neighbour check) reads the sum.
 
     ``PhotonEstimate``  the photon map's estimate at the hit itself (Eq. 9.11; seed 9.5):
         ``full`` mode asks for the photons that bounced at least once (direct light is exact),
@@ -54,6 +58,8 @@ LOCAL_STEPS = (16, 4)   # batch-local records: every 16th uncovered sample, then
 class PhotonEstimate:
     """Indirect (``full``) or all (``photon-map``) light from the photon map's estimate at the
     hit itself (Eq. 9.11; seed 9.5)."""
+
+    channels = 3
 
     def __init__(self, photon_map, k, max_radius, min_bounces, cone_filter, lookups):
         self.photon_map, self.k, self.max_radius = photon_map, k, max_radius
@@ -104,7 +110,7 @@ class FinalGather:
     ``guide``: the photon map whose nearby photons steer ``guide_extra`` x M x N extra rays
     (Jensen 1995). ``sky``: the smooth sky its escaping rays count where the world light left
     it to the gather (``lights.LightSet.gather_sky``); the estimate then holds that direct
-    light too."""
+    light too, in channels of its own (``channels`` 6, module docstring)."""
 
     def __init__(self, estimates, accel, surfaces, m, n, lookups, guide=None, guide_extra=0.0,
                  max_specular=4, mirrored_emission=True, sky=None):
@@ -112,6 +118,7 @@ class FinalGather:
         # The world's smooth sky, counted by the rays that leave the scene
         # (``lights.LightSet.gather_sky``; None: the light samples count all the world).
         self.sky = sky
+        self.channels = 3 if sky is None else 6
         self.m, self.n, self.lookups = m, n, lookups
         self.guide, self.guide_extra = guide, guide_extra
         # Specular bounces a gather ray follows, and whether it counts the emitters it meets
@@ -123,7 +130,8 @@ class FinalGather:
                             self.n, max_specular=self.max_specular, stats=stats,
                             guide=self.guide if self.guide_extra > 0 else None,
                             guide_extra=self.guide_extra,
-                            mirrored_emission=self.mirrored_emission, sky=self.sky)
+                            mirrored_emission=self.mirrored_emission, sky=self.sky,
+                            split_sky=self.sky is not None)
 
     def irradiance(self, x, ns, ng, rng, stats):
         return self.gather(x, ns, ng, rng, stats)[0]
@@ -157,6 +165,7 @@ class CachedIndirect:
         self.use_gradients = use_gradients
         self.eye = np.asarray(eye, np.float64)
         self.pixel_angle = float(pixel_angle)
+        self.channels = gather.channels
 
     def surface_irradiance(self, x, n):
         """As ``FinalGather.surface_irradiance``."""
@@ -189,7 +198,7 @@ def local_cache_records(indirect: CachedIndirect, x, ns, ng, rest, e, covered, r
     serve (and at their own points), marks those ``covered``, and returns (the samples still
     uncovered, the gathers made)."""
     a = indirect.a
-    local = IrradianceCache()
+    local = IrradianceCache(channels=indirect.channels)
     made = 0
     for step in LOCAL_STEPS:
         if len(rest) < 2:                     # one sample: its own gather serves no other
@@ -277,7 +286,7 @@ def place_cache(scene, accel, surfaces, gather: FinalGather, settings, pool, tel
     pixel, x, ng, ns, t_hit = pixel[diffuse], x[diffuse], ng[diffuse], ns[diffuse], t_hit[diffuse]
     footprint = t_hit.astype(np.float64) * (2.0 * cam.tan_half_x / cam.resolution[0])
     a = settings.cache_error
-    cache = IrradianceCache()
+    cache = IrradianceCache(channels=gather.channels)
     row, col = np.divmod(pixel, width)
     stats = {"passes": [], "records": 0}
     record_point, record_variance = [], []       # per record: its pixel's hit, its noise

@@ -605,8 +605,11 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera, subset=
                     usage[:, 0] += np.bincount(owner[covered], minlength=len(usage))
                     usage[:, 1] += np.bincount(owner[~covered], minlength=len(usage))
                 e *= (spp / min(photon.lookups, spp))
-                _add_irradiance(e, ask, surface, glossy, thr, rays, spp, depth, indirect_sums,
-                                light, direct_light and not probe_lookup, rough, kinds)
+                for part, is_direct in _estimate_parts(e):
+                    _add_irradiance(part, ask, surface, glossy, thr, rays, spp, depth,
+                                    direct_sums if is_direct else indirect_sums, light,
+                                    direct_light and not probe_lookup, rough, kinds,
+                                    is_direct=is_direct)
         if idx is not None and direct_light and context.caustics is not None:
             _shade_caustics(context, stats, idx, x, ns_smooth, surface, glossy, thr, rays, spp,
                             depth, indirect_sums, light, probe_lookup, rough, kinds)
@@ -1018,15 +1021,29 @@ def _shade_translucent(context, stats, rng, depth, x, ns, ns_smooth, ng, surface
     e = photon.irradiance(x[at], -ns_smooth[at], -ng[at], rng, stats)
     stats["estimate_seconds"] += time.perf_counter() - t0
     stats.pop("covered_mask", None)
-    value = e * (spp / min(photon.lookups, spp)) * factor[ask]
-    add_to_pixels(indirect_sums, rays[at] // spp, value)
-    if light is not None:
-        light.add(rays[at], value, direct=False, kind=kind if depth == 0 else kind[ask])
+    scale = (spp / min(photon.lookups, spp)) * factor[ask]
+    for part, is_direct in _estimate_parts(e):
+        value = part * scale
+        add_to_pixels(direct_sums if is_direct else indirect_sums, rays[at] // spp, value)
+        if light is not None:
+            light.add(rays[at], value, direct=is_direct and depth == 0,
+                      kind=kind if depth == 0 else kind[ask])
 
 
-def _add_irradiance(e, at, surface, glossy, thr, rays, spp, depth, indirect_sums, light,
-                    glossy_part, rough=None, kinds=None):
-    """Irradiance ``e`` (k, 3) at the diffuse hits ``at`` into the Indirect part: x rho_d / pi
+def _estimate_parts(e):
+    """An indirect estimate's irradiance (k, C) as (part (k, 3), is_direct) pairs: C = 3 is
+    indirect light alone; C = 6 (``indirect.FinalGather.channels``: a gathered sky) adds the
+    sky's direct light, filed in the Direct passes (Cycles' Diffuse Direct)."""
+    if e.shape[1] == 3:
+        return ((e, False),)
+    return ((e[:, :3], False), (e[:, 3:6], True))
+
+
+def _add_irradiance(e, at, surface, glossy, thr, rays, spp, depth, sums, light,
+                    glossy_part, rough=None, kinds=None, is_direct=False):
+    """Irradiance ``e`` (k, 3) at the diffuse hits ``at`` into the pixel ``sums`` of the
+    Indirect part (with ``is_direct``, a gathered sky's direct light: the Direct part's sums,
+    and the light passes' Direct at the first hit): x rho_d / pi
     (below a Principled layer x its diffuse share) and, with ``glossy_part``, plus the glossy
     lobes' albedo / pi at hits where the path ends (their indirect light as if it came
     evenly: where no probe reads it, ``probe_lookup``); x the path's throughput after the
@@ -1039,21 +1056,21 @@ def _add_irradiance(e, at, surface, glossy, thr, rays, spp, depth, indirect_sums
     if glossy is not None:
         value *= glossy.diffuse_factor[at]
         if light is not None and depth == 0:
-            light.add(rays[at], value, direct=False, kind=DIFFUSE)
+            light.add(rays[at], value, direct=is_direct, kind=DIFFUSE)
         if glossy_part:
             reflected = glossy.ending_albedo[at] * e / np.pi
             if light is not None and depth == 0:
                 through = glossy.ending_transmitted[at] * e / np.pi
-                light.add(rays[at], reflected - through, direct=False, kind=GLOSSY)
-                light.add(rays[at], through, direct=False, kind=TRANSMISSION)
+                light.add(rays[at], reflected - through, direct=is_direct, kind=GLOSSY)
+                light.add(rays[at], through, direct=is_direct, kind=TRANSMISSION)
             value += reflected
     elif light is not None and depth == 0:
-        light.add(rays[at], value, direct=False, kind=DIFFUSE)
+        light.add(rays[at], value, direct=is_direct, kind=DIFFUSE)
     if depth > 0:
         value *= thr[at]
         if light is not None:
             light.add(rays[at], value, direct=False, kind=kinds[at])
-    add_to_pixels(indirect_sums, rays[at] // spp, value)
+    add_to_pixels(sums, rays[at] // spp, value)
 
 
 def _counted_direct_terms(context, stats, rng, x, ns, ng, with_directions=False, rays=None):

@@ -218,8 +218,10 @@ def overlay_points(artifacts, kind: str, color_by: str | None = None,
             lo, hi = float(log_r.min()), float(log_r.max())
             t = (log_r[idx] - lo) / (hi - lo) if hi > lo else np.full(len(idx), 0.5)
         elif color_by == "irradiance":
-            lum = np.asarray(source.irradiance, np.float64)[:, :3] @ LUMINANCE \
-                if source.irradiance.shape[1] >= 3 else np.asarray(source.irradiance)[:, 0]
+            e = np.asarray(source.irradiance, np.float64)
+            # RGB, or RGB of indirect light then of a gathered sky (6 channels): their sum.
+            lum = (e.reshape(len(e), -1, 3).sum(axis=1) @ LUMINANCE if e.shape[1] % 3 == 0
+                   else e[:, 0])
             t = _normalised(lum[idx], lum)
         else:
             usage = np.log1p(np.asarray(source.usage, np.float64))

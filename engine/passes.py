@@ -58,10 +58,10 @@ What it computes
     Combined = (DiffDir + DiffInd) DiffCol + (GlossDir + GlossInd) GlossCol + (TransDir +
     TransInd) TransCol + Emit + Env (to float rounding), Cycles' split; Lanterna's own
     Direct / Indirect / Emission split by estimator instead (emitters seen in mirrors are
-    Emission there, Glossy Direct here). One difference from Cycles: where an image world
-    with a sun hands its smooth sky to the final gather (``lights.EnvironmentLight.
-    gather_sky``), the diffuse light of that sky comes with the cache's irradiance and is
-    filed in Diffuse Indirect (and Indirect); the sun's stays in Diffuse Direct.
+    Emission there, Glossy Direct here). Where an image world with a sun hands its smooth
+    sky to the final gather (``lights.EnvironmentLight.gather_sky``), that sky's light comes
+    with the cache's irradiance, in channels of its own (``indirect.FinalGather.channels``),
+    and is filed as direct light, as the sun's: Diffuse Direct (and Direct) at the first hit.
 
 Cycles' light passes (issue 23, item 5)
     Each camera path carries a label, the kind of its first bounce (``DIFFUSE`` 0,

@@ -245,6 +245,13 @@ def _cache(prep: Prepared, scene, settings, gather, lookups, tell, cancelled, ar
     """Stage 7: the irradiance cache's records, placed or taken from ``artifacts``."""
     t0 = time.perf_counter()
     reused = artifacts is not None and artifacts.cache is not None
+    if reused and artifacts.cache.channels != gather.channels:
+        # Saved with the sky in the indirect light's channels, or without a gathered sky:
+        # its records do not hold what this render's passes need, so they are placed anew.
+        prep.report.warn(f"Irradiance cache: the saved records hold {artifacts.cache.channels} "
+                         f"channels, this render needs {gather.channels} (the gathered sky "
+                         "apart); the records are placed again")
+        reused = False
     if reused:
         cache = artifacts.cache
         cache.reset_usage()
@@ -259,7 +266,7 @@ def _cache(prep: Prepared, scene, settings, gather, lookups, tell, cancelled, ar
                       records=cache_stats["records"], passes=cache_stats["passes"],
                       cache_error=settings.cache_error,
                       gather=f"{settings.gather_m}x{settings.gather_n}",
-                      reused=artifacts is not None)
+                      reused=reused)
     prep.cache = cache
     cam = scene.camera
     prep.indirect = CachedIndirect(cache, settings.cache_error, gather, lookups,

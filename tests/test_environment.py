@@ -266,3 +266,54 @@ def test_a_gathered_sky_and_the_suns_light_samples_add_up_to_the_image():
     expected = _analytic_up_irradiance(img)
     assert np.all(np.abs(total - expected) < 4 * se + 1e-9 * expected), (total, expected, se)
     assert np.all(e_sky.mean(axis=0) > 0.02 * expected)       # the sky's share is there
+
+
+def test_a_gathered_skys_light_is_filed_in_diffuse_direct():
+    """Cycles files the world's light on a diffuse first hit in Diffuse Direct, and so does
+    Lanterna however it estimates that light: on the open plane under the sun image, where
+    the final gather counts the smooth sky (``LightSet.gather_sky``) and nothing reflects
+    light onto the plane, Diffuse Indirect and Indirect are exactly 0, DiffDir x DiffCol is
+    the picture, and its mean is rho / pi x the analytic irradiance, sun and sky (measured
+    +0.2 / -0.1 / +0.0 % at seeds 1-3; the sky is 11 % of it; bound 2 %). Fails with the
+    sky's light filed in the indirect passes, as it was (DiffInd x DiffCol = 11 % of the
+    picture)."""
+    from lanterna.engine.passes import LIGHT_PASS_NAMES
+
+    img = _sun_image()
+    scene = _plane_scene(World(environment=Environment(img, interpolation="Closest")),
+                         resolution=(8, 8))
+    res = render(scene, RenderSettings(samples=2, photons=5000, threads=2, seed=1),
+                 passes=LIGHT_PASS_NAMES + ("direct", "indirect"))
+    p = res.passes
+    assert res.report["stages"]["irradiance_cache"]["records"] > 0   # the gather ran
+    assert p["DiffInd"].max() == 0.0 and p["Indirect"].max() == 0.0
+    np.testing.assert_allclose(p["DiffDir"] * p["DiffCol"], res.image, rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(p["Direct"], res.image, rtol=1e-5, atol=1e-7)
+    expected = 0.5 / np.pi * _analytic_up_irradiance(img)
+    mean = res.image.reshape(-1, 3).mean(axis=0)
+    assert np.all(np.abs(mean / expected - 1) < 0.02), mean / expected
+
+
+def test_saved_records_without_the_skys_channels_are_placed_again():
+    """Maps saved before the gathered sky had channels of its own hold 3-channel records; a
+    render that gathers the sky places its records again, with a warning naming both counts,
+    rather than reading the sky's channels out of records that do not have them."""
+    from lanterna.engine import pipeline
+    from lanterna.engine.irradiance_cache import IrradianceCache
+
+    scene = _plane_scene(World(environment=Environment(_sun_image(), interpolation="Closest")),
+                         resolution=(8, 8))
+    settings = RenderSettings(samples=2, photons=5000, threads=2, seed=1)
+    baked = pipeline.bake(scene, settings)
+    assert baked.cache.channels == 6
+    arrays = baked.cache.to_arrays()
+    arrays["irradiance"] = arrays["irradiance"][:, :3] + arrays["irradiance"][:, 3:]
+    for key in ("rot_grad", "trans_grad"):
+        if key in arrays:
+            arrays[key] = arrays[key][:, :3] + arrays[key][:, 3:]
+    arrays["channels"] = np.array(3)
+    baked.cache = IrradianceCache.from_arrays(arrays)
+    res = pipeline.render(scene, settings, artifacts=baked)
+    assert res.report["stages"]["irradiance_cache"]["reused"] is False
+    assert any("3 channels" in w and "needs 6" in w for w in res.report["warnings"])
+    np.testing.assert_array_equal(res.image, pipeline.render(scene, settings).image)
