@@ -338,16 +338,19 @@ class Environment:
         mean = 0.25 * (k00 + k10 + k01 + k11)
         return value / np.where(mean > 0, mean, 1.0)
 
-    def sample_uv(self, u_patch: np.ndarray, u: np.ndarray, table: "PatchTable | None" = None):
+    def sample_uv(self, u_patch: np.ndarray, u: np.ndarray, table: "PatchTable | None" = None,
+                  rank: np.ndarray | None = None):
         """(u, v) texture coordinates in [0, 1) and their density in (u, v) (N,): a patch
         picked by ``u_patch`` (N,) from the sorted ``table`` (default: all patches,
         ``self.table``), the point inside it by ``u`` (N, 2): uniform in a flat cell, else
         from the patch's bilinear surface (pbrt-v4's ``SampleBilinear``: t from the
-        marginal's linear density, then s given t)."""
+        marginal's linear density, then s given t). ``rank``: ``table.rank(u_patch)`` where
+        the caller has it already."""
         h, w = self.grid
         table = self.table if table is None else table
         u = np.clip(np.asarray(u, np.float64).reshape(-1, 2), 0.0, 1.0 - 1e-12)
-        row, col = np.divmod(table.order[table.rank(u_patch)].astype(np.int64), w)
+        rank = table.rank(u_patch) if rank is None else rank
+        row, col = np.divmod(table.order[rank].astype(np.int64), w)
         density = table.share[row, col] * (w * h)
         if self.flat:
             s, t = u[:, 0], u[:, 1]
@@ -370,12 +373,13 @@ class Environment:
         table is reused in its place (module docstring)."""
         table = self.table if table is None else table
         u = np.asarray(u, np.float64).reshape(-1, 2)
+        rank = None
         if u_cell is None:
             u_cell = u[:, 0]
             rank = table.rank(u_cell)
             lo, hi = table.cdf[rank], table.cdf[rank + 1]
             u = np.stack([(u_cell - lo) / np.where(hi > lo, hi - lo, 1.0), u[:, 1]], 1)
-        uu, vv, p_uv = self.sample_uv(u_cell, u, table)
+        uu, vv, p_uv = self.sample_uv(u_cell, u, table, rank)
         tex = equirectangular_to_direction(uu, vv)
         sin_t = np.sin(np.pi * vv)
         pdf = np.where(sin_t > 0, p_uv / (2.0 * np.pi ** 2 * np.maximum(sin_t, 1e-300)), 0.0)
