@@ -134,7 +134,9 @@ Memory [bytes] (keeps: held until the render ends; working: while the stage runs
                        Morton sort; measured by tracemalloc: 113-119 B a photon at the peak)
     radiance_estimates keeps 44 estimates; working 60 estimates + W 16384 k 60
     irradiance_cache   keeps 2 x 304 records (float64 records, capacity doubling) + 100 per
-                       record of index; working 170 F (centre hits) + W 256 G 500 (gather)
+                       record of index, + 3 x 216 per record where the gathered sky has three
+                       channels of its own (``SceneFacts.sky_channels``); working 170 F
+                       (centre hits) + W 256 G 500 (gather)
     shadow_photons     keeps 53 count (about two stored per photon at 18.25 B, kd-trees);
                        working 100 count
     camera             keeps 12 P per image buffer (Combined and each split pass), 264 P
@@ -239,6 +241,9 @@ NEIGHBOUR_BYTES = 60                 # per (query, neighbour) in a k-nearest chu
 ESTIMATE_CHUNK = 16384               # queries per chunk of RadianceEstimates.build
 LOOKUP_CHUNK = 8192                  # queries per chunk of PhotonMap.irradiance
 RECORD_BYTES = 2 * 304 + 100
+# Each channel more: E and three gradients (rotational, translational, H) at 80 B, capacity
+# doubling, and the interpolation's value table (7 float64).
+RECORD_CHANNEL_BYTES = 2 * 80 + 56
 CACHE_PIXEL_BYTES = 170
 GATHER_RAY_BYTES = 500
 GATHER_CHUNK_POINTS = 256            # points per placement task (indirect.place_cache)
@@ -437,6 +442,9 @@ class SceneFacts:
     texture_bytes: int = 0            # the images' texels, each image once [bytes]
     texture_lookups: float = 0.0      # image look-ups per surface hit (area-weighted)
     emission_lookups: float = 0.0     # image look-ups per photon / light sample of the lights
+    sky_channels: int = 0             # 3 where an image world's smooth sky goes to the gather
+                                      # (its bright patches, no portals): the cache's records
+                                      # then hold it apart (``indirect.FinalGather.channels``)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -597,6 +605,9 @@ def scene_facts(scene) -> SceneFacts:
         sampled.append(("world", True, 0.0))
     texture_bytes, texture_lookups, emission_lookups = _texture_facts(
         scene, area_m, exitance, extent)
+    env = scene.world.environment
+    sky_channels = 3 if (env is not None and getattr(env, "bright", None) is not None
+                         and not scene.world.portals) else 0
     w, h = scene.camera.window_size
     fw, fh = scene.camera.resolution
     return SceneFacts(triangles=int(count), window=(int(w), int(h)), frame=(int(fw), int(fh)),
@@ -609,7 +620,7 @@ def scene_facts(scene) -> SceneFacts:
                       diffuse=diffuse.tolist(), specular=specular.tolist(),
                       has_emission=bool(emissive_materials.any()),
                       texture_bytes=texture_bytes, texture_lookups=texture_lookups,
-                      emission_lookups=emission_lookups)
+                      emission_lookups=emission_lookups, sky_channels=sky_channels)
 
 
 def _texture_facts(scene, area_m, exitance, extent) -> tuple[int, float, float]:
@@ -896,7 +907,9 @@ def estimate_from_facts(facts: SceneFacts, settings, rates: Rates | None = None,
             else:
                 looks = (F + records * gather_rays) * facts.texture_lookups
                 add("irradiance_cache", F * r["cache_pixel"] + records * per_gather
-                    + looks * r["texture_lookup"], records * RECORD_BYTES,
+                    + looks * r["texture_lookup"],
+                    records * (RECORD_BYTES + (facts.sky_channels if s.mode == "full" else 0)
+                               * RECORD_CHANNEL_BYTES),
                     F * CACHE_PIXEL_BYTES + W * GATHER_CHUNK_POINTS * gather_rays
                     * GATHER_RAY_BYTES, records=records, gather_rays=records * gather_rays,
                     **_nonzero(texture_lookups=looks))

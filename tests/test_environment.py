@@ -17,7 +17,9 @@ about 20 s).
 * photons from the environment on an open plane: the photon map's irradiance against the
   same integral, within 4 standard errors measured over 9 points (spread of the estimates);
 * a constant image renders as the uniform world does (the mean of 8 seeds within 4 standard
-  errors of the difference, measured from the seeds' spread).
+  errors of the difference, measured from the seeds' spread);
+* a gathered sky's light is filed in Diffuse Direct, as Cycles files it (its own tests say how
+  they fail); saved 3-channel records are placed again; the estimate counts the channels.
 
 Checked to fail (each by editing the module, running this file, then restoring it):
 the sin(theta) factor dropped from the density: all 5 tests fail; ``sample`` drawing uniform
@@ -317,3 +319,20 @@ def test_saved_records_without_the_skys_channels_are_placed_again():
     assert res.report["stages"]["irradiance_cache"]["reused"] is False
     assert any("3 channels" in w and "needs 6" in w for w in res.report["warnings"])
     np.testing.assert_array_equal(res.image, pipeline.render(scene, settings).image)
+
+
+def test_the_estimate_counts_the_gathered_skys_record_channels():
+    """The dry-run estimate knows the cache's records hold a gathered sky's three channels
+    (``SceneFacts.sky_channels``): 3 x 216 bytes more per record than under a flat world."""
+    from lanterna.engine import estimate
+
+    settings = RenderSettings(samples=2, photons=5000, threads=2, seed=1)
+    sun = estimate.estimate_cost(
+        _plane_scene(World(environment=Environment(_sun_image(), interpolation="Closest"))),
+        settings)
+    flat = estimate.estimate_cost(_plane_scene(World(radiance=SKY_L)), settings)
+    assert sun.facts.sky_channels == 3 and flat.facts.sky_channels == 0
+    per_record = [e.stages["irradiance_cache"].keeps / e.stages["irradiance_cache"].counts["records"]
+                  for e in (sun, flat)]
+    assert per_record[0] - per_record[1] == pytest.approx(3 * estimate.RECORD_CHANNEL_BYTES,
+                                                          abs=1.0)
