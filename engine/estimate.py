@@ -605,9 +605,7 @@ def scene_facts(scene) -> SceneFacts:
         sampled.append(("world", True, 0.0))
     texture_bytes, texture_lookups, emission_lookups = _texture_facts(
         scene, area_m, exitance, extent)
-    env = scene.world.environment
-    sky_channels = 3 if (env is not None and getattr(env, "bright", None) is not None
-                         and not scene.world.portals) else 0
+    sky_channels = 3 if scene.world.has_sky_to_gather else 0
     w, h = scene.camera.window_size
     fw, fh = scene.camera.resolution
     return SceneFacts(triangles=int(count), window=(int(w), int(h)), frame=(int(fw), int(fh)),

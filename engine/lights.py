@@ -939,6 +939,7 @@ class EnvironmentLight:
         self.cdf_share = 0.0 if self.environment is None else \
             ENV_CDF_SHARE if self.table is None else BRIGHT_SHARE
         self.sky_gathered = False
+        self.has_sky_to_gather = world.has_sky_to_gather
         self.probes = np.zeros((0, 3))
         if self.environment is not None and len(self.portals):
             u = sampling.stratified_2d(1, PORTAL_PROBES ** 2, np.random.default_rng(0))[0]
@@ -955,12 +956,11 @@ class EnvironmentLight:
         where the image has bright patches and no portal faces the scene: returns the
         radiance function a gather's escaping rays count
         (``environment.Environment.smooth_radiance``), else None (nothing changes)."""
-        env = self.environment
-        if env is None or self.table is None or len(self.portals):
+        if not self.has_sky_to_gather:
             return None
         self.sky_gathered = True
         self.cdf_share = 1.0
-        return env.smooth_radiance
+        return self.environment.smooth_radiance
 
     def selection_weight(self, x, n):
         share = self.environment.bright_power if self.sky_gathered else 1.0

@@ -322,6 +322,14 @@ class World:
         return self if self.camera is None else self.camera
 
     @property
+    def has_sky_to_gather(self) -> bool:
+        """An image with bright patches (a sun, ``Environment.bright``) and no portals: the
+        world whose light samples take the sun alone where a final gather runs, the gather
+        the smooth rest (``lights.EnvironmentLight.gather_sky``)."""
+        return (self.environment is not None and self.environment.bright is not None
+                and not self.portals)
+
+    @property
     def is_black(self) -> bool:
         if self.environment is not None:
             return bool(self.environment.black) or not bool(np.any(self.radiance > 0))

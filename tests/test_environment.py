@@ -311,8 +311,7 @@ def test_saved_records_without_the_skys_channels_are_placed_again():
     arrays = baked.cache.to_arrays()
     arrays["irradiance"] = arrays["irradiance"][:, :3] + arrays["irradiance"][:, 3:]
     for key in ("rot_grad", "trans_grad"):
-        if key in arrays:
-            arrays[key] = arrays[key][:, :3] + arrays[key][:, 3:]
+        arrays[key] = arrays[key][:, :3] + arrays[key][:, 3:]
     arrays["channels"] = np.array(3)
     baked.cache = IrradianceCache.from_arrays(arrays)
     res = pipeline.render(scene, settings, artifacts=baked)
