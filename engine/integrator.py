@@ -720,15 +720,16 @@ def shade_adaptive(context: CameraContext, block):
     few perfect). A pixel's samples, halves and extra ones, are consecutive points of one
     (0, 2)-sequence scrambled for it (``sampling.sobol_02``), so all of them together are as
     well spread over the pixel as one stratified set: drawn as independent jittered sets
-    instead, 16 + 48 samples left the yard's edge pixels 1.3x noisier than 64 in one set. Each pixel is the mean of all its
-    samples (as in Cycles, the extra samples go where the first ones happened to disagree,
-    a bias that falls with their number). Returns what ``shade_block`` returns."""
+    instead, 16 + 48 samples left the yard's edge pixels 1.3x noisier than 64 in one set.
+    Each pixel is the mean of all its samples (as in Cycles, the extra samples go where the
+    first ones happened to disagree, a bias that falls with their number). Returns what
+    ``shade_block`` returns."""
     settings = context.settings
     spp = settings.samples
     if settings.noise_threshold <= 0 or spp < 2:
         return shade_block(context, block.index, block.pixels, block.camera)
     half = spp // 2
-    runs, counts = [], np.zeros(block.pixels)
+    runs = []
     for part, samples in enumerate((half, spp - half)):
         run = shade_block(replace(context, settings=replace(settings, samples=samples)),
                           block.index + (part << 32), block.pixels, block.camera,
@@ -775,7 +776,7 @@ def shade_adaptive(context: CameraContext, block):
                               block.camera, subset=subset, sequence=(block.index, spp))
             runs.append((subset, int(samples), run))
     # Every pixel's mean over all its samples.
-    parts = np.zeros((3, block.pixels, 3))
+    parts, counts = np.zeros((3, block.pixels, 3)), np.zeros(block.pixels)
     usage = None if runs[0][2][2] is None else np.zeros((block.pixels, 2))
     light = None if runs[0][2][3] is None else np.zeros(runs[0][2][3].shape)
     stats = dict.fromkeys(BATCH_COUNTERS, 0)
@@ -802,7 +803,9 @@ def shade_adaptive(context: CameraContext, block):
 
 
 def _box_3x3(values: np.ndarray) -> np.ndarray:
-    """The mean of each (H, W) value's 3 x 3 neighbourhood (edges repeated)."""
+    """The mean of each (H, W) value's 3 x 3 neighbourhood (edges repeated): scipy's
+    ``uniform_filter(size=3, mode="nearest")``, in numpy, as scipy is not bundled with the
+    add-on (blender_manifest.toml)."""
     h, w = values.shape
     padded = np.pad(values, 1, mode="edge")
     return sum(padded[i:i + h, j:j + w] for i in range(3) for j in range(3)) / 9.0
