@@ -30,7 +30,9 @@ Sampling
     emitter's distinct vertices ((N, V) component arrays; corners that triangles share are
     normalised once). Larger meshes choose a triangle by area with ``searchsorted`` on
     cumulative areas (the seed's "area line") and an area-uniform point (DESIGN.md §4). Disks
-    and ellipses are sampled by area through the concentric map. Suns with an angle sample their cone
+    and ellipses are sampled by area through the concentric map. An emitting triangle gives
+    nothing to the points that lie on it (``TriangleEmitter.on_surface``: a camera hit on a
+    lit emission panel sees its own triangle edge-on). Suns with an angle sample their cone
     uniformly; the world is sampled with cosine-distributed directions (E = pi L V). Sphere
     lights sample the cone they subtend uniformly (the standard sphere-light sampling; Cycles
     ``point_light_sample``), cosine directions from inside, and their facing disk by area; a
@@ -57,7 +59,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import sampling
-from .accel import Accelerator
+from .accel import Accelerator, offset_distance
 from .bsdf import MaterialTable
 from .scene import AreaLight, PointLight, Scene, SpotLight, SunLight
 
@@ -187,6 +189,8 @@ class TriangleEmitter:
                                               return_inverse=True)
             self.corner_index = corner.reshape(-1, 3)
             self.plane_offset = _dot(self.tris[:, 0], self.normals)   # n . corner 0
+        self.extent = float(np.linalg.norm(self.tris.reshape(-1, 3).max(axis=0)
+                                           - self.tris.reshape(-1, 3).min(axis=0)))
         self.centroid = (self.tris.mean(axis=1) * self.areas[:, None]).sum(0) / self.total_area
         self.mean_scale = float(emitting.sum()) / self.total_area
         self.power = np.pi * self.rgb * float(emitting.sum()) * (2 if two_sided else 1)
@@ -236,11 +240,34 @@ class TriangleEmitter:
             index = np.where(hit, k, index)
         return index, np.where(index >= 0, best, np.inf)
 
-    def _solid_angles(self, x, with_units: bool = False):
+    def on_surface(self, x, n, tri=None):
+        """Whether points x (N, 3) with normals n (N, 3) lie on the emitter's triangles
+        ``tri`` (N,) (one each; None: each point against all of them, (N, T)): within the
+        offset that rays leave surfaces by (``accel.offset_distance``, at the emitter's own
+        size) of the triangle's plane, with a normal within 60 degrees of its. Such a
+        triangle is the point's own surface (or flush with it), seen edge-on: it sends no
+        light there. Without this a camera hit on a two-sided emitter, rounded to its far
+        side, took its own triangle's light over a whole hemisphere: Blender's Principled
+        BSDF with Emission over the default Base Color, a lone plane, rendered 7 % too
+        bright, single pixels 47 %; a one-sided emitter lost its samples there. A point near
+        an emitting wall of another orientation (on the floor, 10 um from the wall) is not on
+        it and gets its light (tests/test_hard_cases.py). ``n`` None: no point is on any."""
+        if n is None:
+            return np.zeros((len(x),) if tri is not None else (len(x), len(self.tris)), bool)
+        band = offset_distance(x, self.extent)
+        if tri is None:
+            height = self.plane_offset[None, :] - x @ self.normals.T          # (c0 - x) . n
+            return (np.abs(height) <= band[:, None]) & (np.abs(n @ self.normals.T) >= 0.5)
+        normals = self.normals[tri]
+        height = _dot(self.tris[tri, 0] - x, normals)
+        return (np.abs(height) <= band) & (np.abs(_dot(n, normals)) >= 0.5)
+
+    def _solid_angles(self, x, n=None, with_units: bool = False):
         """(N, T) solid angles [sr] of the triangles seen from points x, 0 for one-sided
-        triangles seen from behind, times each triangle's factor ``scale`` (the sampler's
-        choice of triangle, ``sample``); ``with_units``: also the unit directions to the
-        vertices, per component ([x, y, z] of (N, V))."""
+        triangles seen from behind and for those x lies on (with normals n: ``on_surface``),
+        times each triangle's factor ``scale`` (the sampler's choice of triangle,
+        ``sample``); ``with_units``: also the unit directions to the vertices, per component
+        ([x, y, z] of (N, V))."""
         # Unit directions to the vertices, component by component (N, V), then the
         # triangles' solid angles (Van Oosterom and Strackee) from their corners (N, T).
         unit = [self.vertices[None, :, k] - x[:, k:k + 1] for k in range(3)]
@@ -257,7 +284,9 @@ class TriangleEmitter:
         denom = (1.0 + (ax * bx + ay * by + az * bz) + (bx * cx + by * cy + bz * cz)
                  + (cx * ax + cy * ay + cz * az))
         omega = 2.0 * np.arctan2(triple, denom)                              # (N, T)
-        # Triangles seen from behind (one-sided) or edge-on give nothing: skip them.
+        # Triangles seen from behind (one-sided), edge-on, or that x lies on
+        # (``on_surface``) give nothing: skip them.
+        omega = np.where(self.on_surface(x, n), 0.0, omega)
         if not self.two_sided:
             side = self.plane_offset[None, :] - x @ self.normals.T        # (c0 - x) . n
             omega = np.where(side < 0, omega, 0.0)
@@ -271,6 +300,7 @@ class TriangleEmitter:
         decides; solid-angle sampling 1 / Omega_total (a small triangle's area sampling:
         Omega_t / Omega_total x r^2 / (cos_l A_t)); area sampling r^2 / (cos_l A_total)."""
         x = np.asarray(points, np.float64).reshape(-1, 3)
+        n = None if normals is None else np.asarray(normals, np.float64).reshape(-1, 3)
         w = np.asarray(wi, np.float64).reshape(-1, 3)
         pdf = np.zeros(len(x))
         tri, t = self.nearest_triangle(x, w)
@@ -281,7 +311,7 @@ class TriangleEmitter:
         cos_l = np.abs(_dot(w[hit], self.normals[k]))
         with np.errstate(divide="ignore", invalid="ignore"):
             if self.use_solid_angle:
-                omega = self._solid_angles(x[hit])
+                omega = self._solid_angles(x[hit], None if n is None else n[hit])
                 total = omega.sum(axis=1)
                 chosen = omega[np.arange(len(hit)), k]
                 small = chosen / total * r * r / (cos_l * self.areas[k])
@@ -291,6 +321,9 @@ class TriangleEmitter:
             else:
                 factor = 1.0 if self.scale is None else self.scale[k] / self.mean_scale
                 value = factor * r * r / (cos_l * self.total_area)
+                # Never sampled where x lies on the triangle (``sample``).
+                value = np.where(self.on_surface(x[hit], None if n is None else n[hit], k),
+                                 0.0, value)
         pdf[hit] = np.where(np.isfinite(value) & (cos_l > 0), value, 0.0)
         return pdf
 
@@ -313,7 +346,7 @@ class TriangleEmitter:
         count = len(x)
         if self.use_solid_angle:
             rows = np.arange(count)
-            omega, unit = self._solid_angles(x, with_units=True)   # x the triangles' factors
+            omega, unit = self._solid_angles(x, n, with_units=True)   # x the triangles' factors
             total = omega.sum(axis=1)
             cdf = np.cumsum(omega, axis=1)
             pick_u = u[:, 0] * total
@@ -370,7 +403,8 @@ class TriangleEmitter:
             direction = d / dist[:, None]
             cos_l = np.abs(_dot(direction, self.normals[tri]))
             pdf_w = share * r2 / np.maximum(cos_l * self.areas[tri], 1e-300)
-            valid = cos_l > 0
+            # A point on the sampled triangle gets nothing from it (``on_surface``).
+            valid = (cos_l > 0) & ~self.on_surface(x, n, tri)
         cos_x = np.maximum(_dot(n, direction), 0.0)
         facing = self._facing(x, tri, direction)
         if self.radiance_at is not None:
@@ -542,7 +576,9 @@ class EllipseEmitter:
         near = np.linalg.norm(x - self.center, axis=1) < self.near_distance
         pdf = np.zeros(len(x))
         if near.any():
-            pdf[near] = self.fan.solid_angle_pdf(x[near], None, w[near])
+            pdf[near] = self.fan.solid_angle_pdf(
+                x[near], None if normals is None else np.asarray(normals).reshape(-1, 3)[near],
+                w[near])
         far = ~near
         if far.any():
             t, hit = self.intersect(x[far], w[far], np.inf)

@@ -106,6 +106,53 @@ def test_triangle_light_lambert_formula(many_triangles):
     _assert_mc(est, exact)
 
 
+@pytest.mark.parametrize("many_triangles", [False, True])
+def test_an_emitter_does_not_light_itself(many_triangles):
+    """Points on a two-sided emission triangle (the only light), on it up to float32 rounding
+    (+-1e-7 m across its plane, where hit points land) and facing either way, get no direct
+    light from it: they see it edge-on (``lights.TriangleEmitter.on_surface``). Before the
+    fix the points rounded to its far side took its light over their whole hemisphere:
+    estimates up to 37 W/m^2 (M = 30) by the solid-angle path (one triangle), 5e-6 by the
+    area-sampling path (256)."""
+    tri = np.array([[-0.5, -0.3, 1.0], [0.7, -0.2, 1.2], [0.1, 0.6, 0.9]])
+    light_tris = tri[None]
+    while many_triangles and len(light_tris) < 256:
+        a, b, c = light_tris[:, 0], light_tris[:, 1], light_tris[:, 2]
+        ab, bc, ca = (a + b) / 2, (b + c) / 2, (c + a) / 2
+        light_tris = np.concatenate([np.stack(t, 1) for t in
+                                     ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))])
+    floor = quad([0, 0, 0], [5, 0, 0], [0, 5, 0])
+    tris = np.concatenate([floor, light_tris]).astype(np.float32)
+    mids = np.r_[np.zeros(len(floor)), np.ones(len(light_tris))].astype(np.int32)
+    scene = Scene(triangles=tris, material_ids=mids,
+                  materials=[Material("floor"), Material("emitter", diffuse=0.8, exitance=30.0)],
+                  camera=Camera.look_at([0, 0, 3], [0, 0, 0]))
+    normal = np.cross(tri[1] - tri[0], tri[2] - tri[0])
+    normal /= np.linalg.norm(normal)
+    bary = np.random.default_rng(3).dirichlet([2, 2, 2], 40)
+    on = bary @ tri
+    pts = np.concatenate([on, on + 1e-7 * normal, on - 1e-7 * normal] * 2)
+    n = np.concatenate([np.tile(normal, (120, 1)), np.tile(-normal, (120, 1))])
+    est = _irradiance_samples(scene, pts, n, light_samples=16, repeats=4)
+    assert np.all(est == 0), est.max()
+
+
+@pytest.mark.parametrize("tilt", [0.0, 0.3])
+def test_a_lone_emission_plane_shows_its_emission_only(tilt):
+    """A plane of diffuse 0.8 that emits M = pi (L = 1), alone under a black world (a
+    Principled BSDF with Emission over the default Base Color, as Blender users make light
+    panels): nothing lights it but itself, and a plane cannot see itself, so every pixel on it
+    is L = 1 (Cycles'). Before the fix its pixels came out up to 1.93 (image means 1.12 and
+    1.41 flat and tilted): hit points rounded to the plane's far side took its light."""
+    plane = quad([-1, -1, 0.3 * tilt], [2, 0, 0], [0, 2, tilt]).astype(np.float32)
+    scene = Scene(triangles=plane, material_ids=np.zeros(len(plane), np.int32),
+                  materials=[Material("Panel", diffuse=0.8, exitance=np.pi)],
+                  camera=Camera.look_at([0.3, -0.2, 3], [0, 0, 0], resolution=(32, 32),
+                                        fov_x_deg=30))
+    image = render(scene, RenderSettings(seed=1, samples=4, threads=2)).image
+    np.testing.assert_allclose(image[8:24, 8:24], 1.0, rtol=1e-5)
+
+
 def test_rectangle_light_lambert_formula():
     m = np.eye(4)
     m[:3, 3] = [0.2, -0.1, 0.8]          # emits towards -Z (down)
