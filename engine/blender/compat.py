@@ -23,6 +23,11 @@ its own package, also on its own by file path, as the extension test does).
 * ``multilayer_exr(image_settings)``: 5.0 made "multilayer" a media type
   (``ImageFormatSettings.media_type = 'MULTI_LAYER_IMAGE'``) that must be set before
   ``file_format = 'OPEN_EXR_MULTILAYER'`` is accepted; 4.2 and 4.5 have no ``media_type``.
+* ``default_surface_is_principled()``: what Cycles renders faces without a material with: a
+  Diffuse BSDF of 0.8 in 4.2 and 4.5, the default Principled BSDF (Base Color 0.8, Roughness
+  0.5, IOR 1.5, its dielectric layer) from 5.0 on. Measured: a sunlit plane without a
+  material renders as one with a Diffuse BSDF of 0.8 in 4.2 and 4.5 and as one with a default
+  Principled BSDF in 5.0, 5.2 and 5.3 (0.515-0.544 against 0.573 towards the horizon).
 * ``exit_process(code)``: ``bpy`` *as a Python module* before 5.0 cannot end a process once an
   add-on has registered a property with a Python ``update`` callback (Lanterna's properties
   have them): at interpreter exit bpy 4.2 crashes (SIGSEGV: ``SpaceType``'s C++ destructor calls
@@ -40,7 +45,8 @@ import sys
 
 __all__ = ["blender_version", "nodes_always_on", "ensure_node_tree", "node_tree_in_use",
            "uses_nodes", "light_exposure", "light_normalized", "eevee_engine_id",
-           "multilayer_exr", "module_exit_is_unsafe", "exit_process"]
+           "multilayer_exr", "default_surface_is_principled", "module_exit_is_unsafe",
+           "exit_process"]
 
 
 def blender_version() -> tuple[int, int, int]:
@@ -103,6 +109,12 @@ def multilayer_exr(image_settings) -> None:
     if hasattr(image_settings, "media_type"):          # 5.0 and later
         image_settings.media_type = 'MULTI_LAYER_IMAGE'
     image_settings.file_format = 'OPEN_EXR_MULTILAYER'
+
+
+def default_surface_is_principled() -> bool:
+    """Whether Cycles shades faces without a material with the default Principled BSDF
+    (5.0 on) rather than a Diffuse BSDF of 0.8 (4.2, 4.5): module docstring."""
+    return blender_version() >= (5, 0, 0)
 
 
 def module_exit_is_unsafe() -> bool:

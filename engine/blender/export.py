@@ -20,7 +20,8 @@ animation already applied by Blender) and turns it into the renderer's inert sce
   ``material_ids`` (T,) int32 into ``materials``, ``object_ids`` (T,) int32 into
   ``object_names``.
 * **Materials** (one per Blender material, deduplicated; slots without a material and objects
-  without slots share a default grey diffuse of rho_d = 0.8): when the material has a
+  without slots share ``default_surface``: Cycles' default Principled BSDF from Blender 5.0
+  on, a grey diffuse of rho_d = 0.8 before): when the material has a
   ``lanterna`` property group with ``derive_from_nodes`` False, its ``diffuse``, ``specular``
   and ``exitance`` are used as they are. Otherwise they are derived from the node tree feeding
   the active Material Output's Surface (:func:`material_from_nodes`, also what the Material
@@ -1093,6 +1094,30 @@ def material_from_nodes(mat, warn=None, images: dict | None = None,
                     shading_normal=shading_normal)
 
 
+class _UnsetPrincipled:
+    """A Principled BSDF node with no sockets: every input reads its default."""
+
+    name = "Principled BSDF"
+    type = "BSDF_PRINCIPLED"
+    distribution = "MULTI_GGX"
+    inputs: dict = {}
+
+
+def default_surface(warn=None) -> Material:
+    """The material of faces without one, as Cycles renders them
+    (``compat.default_surface_is_principled``): a Diffuse BSDF of ``DEFAULT_DIFFUSE`` in
+    Blender 4.2 and 4.5, the default Principled BSDF from 5.0 on (its dielectric layer
+    darkens a sunlit plane towards the horizon by up to 10 %: the plain diffuse made it that
+    much too bright)."""
+    if not compat.default_surface_is_principled():
+        return Material("Default", diffuse=np.full(3, DEFAULT_DIFFUSE))
+    warn = warn if warn is not None else _Warnings()
+    closure = _NodeReader("Default surface", warn)._principled(_UnsetPrincipled())
+    seed = seed_reduction([closure])
+    d, s, e = _clamp_reflectances("Default", seed.diffuse, seed.specular, seed.exitance, warn)
+    return Material("Default", diffuse=d, specular=s, exitance=e, closures=(closure,))
+
+
 def _shading_normal(reader: _NodeReader, closures, warn) -> tuple | None:
     """The graph socket of the material's node-driven Normal (``Material.shading_normal``),
     with a warning saying what it shapes; a second, different one is named and ignored."""
@@ -1419,7 +1444,7 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
         if mat is None:
             if not default_id:
                 default_id.append(len(materials))
-                materials.append(Material("Default", diffuse=np.full(3, DEFAULT_DIFFUSE)))
+                materials.append(default_surface(warn))
             return default_id[0]
         key = getattr(mat, "original", mat).as_pointer()
         if key not in material_index:
