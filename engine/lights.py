@@ -189,8 +189,9 @@ class TriangleEmitter:
                                               return_inverse=True)
             self.corner_index = corner.reshape(-1, 3)
             self.plane_offset = _dot(self.tris[:, 0], self.normals)   # n . corner 0
-        self.extent = float(np.linalg.norm(self.tris.reshape(-1, 3).max(axis=0)
-                                           - self.tris.reshape(-1, 3).min(axis=0)))
+        self.lower = self.tris.reshape(-1, 3).min(axis=0)      # the emitter's box [m]
+        self.upper = self.tris.reshape(-1, 3).max(axis=0)
+        self.extent = float(np.linalg.norm(self.upper - self.lower))
         self.centroid = (self.tris.mean(axis=1) * self.areas[:, None]).sum(0) / self.total_area
         self.mean_scale = float(emitting.sum()) / self.total_area
         self.power = np.pi * self.rgb * float(emitting.sum()) * (2 if two_sided else 1)
@@ -240,11 +241,11 @@ class TriangleEmitter:
             index = np.where(hit, k, index)
         return index, np.where(index >= 0, best, np.inf)
 
-    def on_surface(self, x, n, tri=None):
+    def on_surface(self, x, n, tri):
         """Whether points x (N, 3) with normals n (N, 3) lie on the emitter's triangles
-        ``tri`` (N,) (one each; None: each point against all of them, (N, T)): within the
-        offset that rays leave surfaces by (``accel.offset_distance``, at the emitter's own
-        size) of the triangle's plane, with a normal within 60 degrees of its. Such a
+        ``tri`` (N,) (one each): within the offset that rays leave surfaces by
+        (``accel.offset_distance``, at the emitter's own size) of the triangle's plane, with
+        a normal within 60 degrees of its. Such a
         triangle is the point's own surface (or flush with it), seen edge-on: it sends no
         light there. Without this a camera hit on a two-sided emitter, rounded to its far
         side, took its own triangle's light over a whole hemisphere: Blender's Principled
@@ -253,11 +254,8 @@ class TriangleEmitter:
         an emitting wall of another orientation (on the floor, 10 um from the wall) is not on
         it and gets its light (tests/test_hard_cases.py). ``n`` None: no point is on any."""
         if n is None:
-            return np.zeros((len(x),) if tri is not None else (len(x), len(self.tris)), bool)
+            return np.zeros(len(x), bool)
         band = offset_distance(x, self.extent)
-        if tri is None:
-            height = self.plane_offset[None, :] - x @ self.normals.T          # (c0 - x) . n
-            return (np.abs(height) <= band[:, None]) & (np.abs(n @ self.normals.T) >= 0.5)
         normals = self.normals[tri]
         height = _dot(self.tris[tri, 0] - x, normals)
         return (np.abs(height) <= band) & (np.abs(_dot(n, normals)) >= 0.5)
@@ -284,9 +282,18 @@ class TriangleEmitter:
         denom = (1.0 + (ax * bx + ay * by + az * bz) + (bx * cx + by * cy + bz * cz)
                  + (cx * ax + cy * ay + cz * az))
         omega = 2.0 * np.arctan2(triple, denom)                              # (N, T)
-        # Triangles seen from behind (one-sided), edge-on, or that x lies on
-        # (``on_surface``) give nothing: skip them.
-        omega = np.where(self.on_surface(x, n), 0.0, omega)
+        # Triangles that x lies on (``on_surface``: few pairs, tested where x is near the
+        # plane) or that it sees from behind (one-sided) give nothing: skip them.
+        if n is not None:
+            band = offset_distance(x, self.extent)[:, None]
+            near = np.flatnonzero(np.all((x >= self.lower - band) & (x <= self.upper + band),
+                                         axis=1))           # within the emitter's box
+            if len(near):
+                height = self.plane_offset[None, :] - x[near] @ self.normals.T
+                rows, cols = np.nonzero(np.abs(height) <= band[near])
+                rows = near[rows]
+                on = self.on_surface(x[rows], n[rows], cols)
+                omega[rows[on], cols[on]] = 0.0
         if not self.two_sided:
             side = self.plane_offset[None, :] - x @ self.normals.T        # (c0 - x) . n
             omega = np.where(side < 0, omega, 0.0)
