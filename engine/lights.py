@@ -245,14 +245,14 @@ class TriangleEmitter:
         """Whether points x (N, 3) with normals n (N, 3) lie on the emitter's triangles
         ``tri`` (N,) (one each): within the offset that rays leave surfaces by
         (``accel.offset_distance``, at the emitter's own size) of the triangle's plane, with
-        a normal within 60 degrees of its. Such a
-        triangle is the point's own surface (or flush with it), seen edge-on: it sends no
-        light there. Without this a camera hit on a two-sided emitter, rounded to its far
-        side, took its own triangle's light over a whole hemisphere: Blender's Principled
-        BSDF with Emission over the default Base Color, a lone plane, rendered 7 % too
-        bright, single pixels 47 %; a one-sided emitter lost its samples there. A point near
-        an emitting wall of another orientation (on the floor, 10 um from the wall) is not on
-        it and gets its light (tests/test_hard_cases.py). ``n`` None: no point is on any."""
+        a normal within 60 degrees of its. Such a triangle is the point's own surface (or
+        flush with it), seen edge-on: it sends no light there. Without this a camera hit on a
+        two-sided emitter, rounded to its far side, took its own triangle's light over a
+        whole hemisphere: Blender's Principled BSDF with Emission over the default Base
+        Color, a lone plane, rendered 7 % too bright, single pixels 47 %; a one-sided
+        emitter lost its samples there. A point near an emitting wall of another orientation
+        (on the floor, 10 um from the wall) is not on it and gets its light
+        (tests/test_hard_cases.py). ``n`` None: no point is on any."""
         if n is None:
             return np.zeros(len(x), bool)
         band = offset_distance(x, self.extent)
