@@ -1,4 +1,5 @@
-"""Primary rays: a pinhole camera with Blender's framing and a Blackman-Harris pixel filter.
+"""Primary rays: Blender's perspective and orthographic cameras, with their thin lens (depth
+of field) as Cycles models it, Blender's framing and a Blackman-Harris pixel filter.
 
 What it computes
     For pixels of the render window and ``samples`` samples per pixel, ray origins on the
@@ -12,10 +13,14 @@ Parameters
                       start/end, border window; y counted from the bottom like Blender).
     ``samples``       samples per pixel (default 16).
     ``filter_width``  Blackman-Harris width in pixels (default 1.5, Cycles' default).
+    Depth of field: ``camera.aperture_radius`` [m] (0 = pinhole), ``focus_distance`` [m],
+    ``aperture_blades`` (0 or >= 3), ``aperture_rotation`` [rad], ``aperture_ratio``; the
+    lens points are stratified per pixel, in a random order (``aperture_points``).
 
 The seed's camera (3.4) has a position, a view direction, an up vector, the image-plane
 distance and a horizontal aperture; Blender's camera gives the same through its matrix,
-sensor fit and clip start (the image-plane distance: nothing nearer is seen).
+sensor fit and clip start (the image-plane distance: nothing nearer is seen). Depth of field
+follows the thin lens of Cook, Porter and Carpenter (1984) as Cycles applies it (``_lens_rays``).
 """
 from __future__ import annotations
 
@@ -63,6 +68,14 @@ def pixel_rays(camera, pixel_start: int, pixel_stop: int, samples: int, rng: np.
     ly = off[..., 1] * scale_y
     ly += cy[:, None]
     lx, ly = lx.reshape(-1), ly.reshape(-1)
+    if camera.orthographic or (camera.aperture_radius > 0 and not centres):
+        lens = None
+        if camera.aperture_radius > 0 and not centres:
+            # Lens positions stratified per pixel, in a random order (so that they are not
+            # paired with the pixel positions' strata).
+            lens = aperture_points(sampling.stratified_2d(len(pix), samples, rng).reshape(-1, 2),
+                                   camera)
+        return _lens_rays(camera, lx, ly, lens)
     m = camera.matrix
     rotation = (m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0)).astype(np.float32)  # no scale
     position = m[:3, 3].astype(np.float32)
@@ -83,3 +96,70 @@ def pixel_rays(camera, pixel_start: int, pixel_stop: int, samples: int, rng: np.
     sampling.scale_rows(directions, np.float32(1.0) / length, out=directions)
     tmax = np.float32(camera.clip_end - camera.clip_start) * length
     return origins, directions, tmax
+
+
+def aperture_points(u: np.ndarray, camera) -> np.ndarray:
+    """(N, 2) points [m] on the camera's lens in its x, y plane from (N, 2) numbers in
+    [0, 1)^2, uniform by area: a disk, or with ``aperture_blades`` >= 3 a regular polygon
+    whose circumradius is the aperture radius and whose first edge's middle lies at
+    ``aperture_rotation`` (Cycles' ``regular_polygon_sample``); x divided by
+    ``aperture_ratio``."""
+    u = np.asarray(u, np.float64).reshape(-1, 2)
+    blades = camera.aperture_blades
+    if blades < 3:
+        p = sampling.square_to_disk(u)
+    else:
+        scaled = u[:, 0] * blades
+        corner = np.minimum(np.floor(scaled), blades - 1)
+        a = np.sqrt(scaled - corner)              # uniform point of the corner's triangle
+        b = u[:, 1] * a
+        a = 1.0 - a
+        half = np.pi / blades
+        x, y = (a + b) * np.cos(half), (a - b) * np.sin(half)
+        turn = camera.aperture_rotation + corner * (2.0 * np.pi / blades)
+        c, s = np.cos(turn), np.sin(turn)
+        p = np.stack([c * x - s * y, s * x + c * y], axis=1)
+    p *= camera.aperture_radius
+    p[:, 0] /= camera.aperture_ratio
+    return p
+
+
+def _lens_rays(camera, lx, ly, lens):
+    """``pixel_rays`` for an orthographic camera or a thin lens (``lens``: (N, 2) points on
+    it [m], or None for the pinhole), as Cycles' ``camera_sample_perspective`` and
+    ``camera_sample_orthographic``: a ray through the lens point aims at the point of the
+    focus plane its pixel sample sees through the lens's centre, and starts where it crosses
+    the near clip (perspective: at clip start / cos of the pinhole ray's angle along it)."""
+    count = len(lx)
+    lx, ly = lx.astype(np.float64), ly.astype(np.float64)
+    start = float(camera.clip_start)
+    local_o = np.zeros((count, 3))
+    if camera.orthographic:
+        local_o[:, 0], local_o[:, 1] = lx, ly
+        d = np.zeros((count, 3))
+        d[:, 2] = -1.0
+        if lens is not None:
+            d[:, 0], d[:, 1], d[:, 2] = -lens[:, 0], -lens[:, 1], -camera.focus_distance
+            d /= np.linalg.norm(d, axis=1)[:, None]
+            local_o[:, :2] += lens
+        local_o += d * (start / -d[:, 2])[:, None]
+        reach = np.full(count, camera.clip_end - start)
+    else:
+        pinhole = np.stack([lx, ly, -np.ones(count)], axis=1)
+        stretch = np.linalg.norm(pinhole, axis=1)          # 1 / cos of the pinhole ray's angle
+        if lens is None:
+            d = pinhole
+        else:
+            d = pinhole * camera.focus_distance
+            d[:, :2] -= lens
+            local_o[:, :2] = lens
+        d /= np.linalg.norm(d, axis=1)[:, None]
+        local_o += d * (start * stretch)[:, None]
+        reach = (camera.clip_end - start) * stretch
+    m = camera.matrix
+    rotation = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0)
+    origins = (local_o @ rotation.T + m[:3, 3]).astype(np.float32)
+    directions = (d @ rotation.T).astype(np.float32)
+    length = np.sqrt(sampling.dot_rows(directions, directions))
+    sampling.scale_rows(directions, np.float32(1.0) / length, out=directions)
+    return origins, directions, reach.astype(np.float32)

@@ -239,12 +239,6 @@ class CameraContext:
     caustics: object = None        # indirect.CausticEstimate, or None (no caustic map)
     light_passes: bool = False     # sum Cycles' light passes (``engine/passes.py``)
 
-    @property
-    def pixel_angle(self) -> float:
-        """A pixel's width at unit distance (the footprint of Bump's finite differences)."""
-        camera = self.scene.camera
-        return 2.0 * camera.tan_half_x / max(camera.resolution[0], 1)
-
 
 @dataclass
 class CameraImage:
@@ -561,7 +555,7 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera, subset=
         ns_smooth = ns
         if materials.has_shading_normals:
             ns = materials.shading_normals(surface.material, prim, bu, bv, x, ns, ng, -d,
-                                           front, t_hit * context.pixel_angle)
+                                           front, context.scene.camera.footprint(t_hit))
 
         glossy = None
         if materials.has_glossy:

@@ -263,16 +263,18 @@ def shadow_classes_image(hits: CentreHits, shadow_map, light_indices) -> np.ndar
 
 def project_to_window(camera, points: np.ndarray):
     """Window pixel (row-major, top row first; -1 outside the window or behind the camera)
-    and distance [m] from the camera of each world-space point: the inverse of
+    and distance [m] from the camera (its eye, or for an orthographic camera its plane) of each
+    world-space point: the inverse of
     ``camera.pixel_rays``' pixel-centre mapping."""
     p = np.asarray(points, np.float64).reshape(-1, 3)
-    m = camera.matrix
-    rotation = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0)
-    local = (p - m[:3, 3]) @ rotation             # camera space: looks along -z
+    local = camera.to_camera_space(p)             # camera space: looks along -z
     depth = -local[:, 2]
     ok = depth > camera.clip_start
     safe = np.where(ok, depth, 1.0)
-    lx, ly = local[:, 0] / safe, local[:, 1] / safe
+    if camera.orthographic:
+        lx, ly = local[:, 0], local[:, 1]
+    else:
+        lx, ly = local[:, 0] / safe, local[:, 1] / safe
     full_w, full_h = camera.resolution
     px = np.floor((lx - (camera.shift_x - camera.tan_half_x)) * full_w / (2 * camera.tan_half_x))
     py = np.floor((ly - (camera.shift_y - camera.tan_half_y)) * full_h / (2 * camera.tan_half_y))
@@ -282,21 +284,18 @@ def project_to_window(camera, points: np.ndarray):
     col = px - x0
     row = (win_h - 1) - (py - y0)
     pixel = np.where(ok, row * win_w + col, -1).astype(np.int64)
-    return pixel, np.linalg.norm(p - m[:3, 3], axis=1)
+    return pixel, camera.rays_to(p)[2]
 
 
 def visible_points(camera, accel, points: np.ndarray):
     """(window pixel, mask of visible points): projection plus an occlusion ray each."""
-    pixel, dist = project_to_window(camera, points)
+    pixel, _dist = project_to_window(camera, points)
     inside = np.nonzero(pixel >= 0)[0]
     visible = np.zeros(len(pixel), bool)
     if len(inside):
-        eye = np.asarray(camera.matrix[:3, 3], np.float64)
-        d = np.asarray(points, np.float64)[inside] - eye
-        dist_in = dist[inside]
-        d /= np.maximum(dist_in, 1e-30)[:, None]
-        origins = np.broadcast_to(eye, d.shape).astype(np.float32)
-        t, prim, _u, _v = accel.intersect(origins, d.astype(np.float32), None)
+        origins, d, dist_in = camera.rays_to(np.asarray(points, np.float64)[inside])
+        t, prim, _u, _v = accel.intersect(origins.astype(np.float32), d.astype(np.float32),
+                                          None)
         reach = dist_in * (1.0 - VISIBLE_TOLERANCE) - 1e-6
         visible[inside] = (prim < 0) | (t >= reach)
     return pixel, visible

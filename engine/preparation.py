@@ -271,8 +271,8 @@ def _cache(prep: Prepared, scene, settings, gather, lookups, tell, cancelled, ar
     cam = scene.camera
     prep.indirect = CachedIndirect(cache, settings.cache_error, gather, lookups,
                                    settings.cache_gradients,
-                                   eye=np.asarray(cam.matrix, np.float64)[:3, 3],
-                                   pixel_angle=2.0 * cam.tan_half_x / cam.resolution[0])
+                                   eye=cam.position, pixel_angle=cam.pixel_angle,
+                                   pixel_width=cam.pixel_width)
 
 
 def _shadow_photons(prep: Prepared, scene, settings, tell, artifacts):

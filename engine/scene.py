@@ -32,6 +32,7 @@ traced (NaN or infinite corners, zero area), counting them in ``warnings``.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -345,15 +346,23 @@ class World:
 
 @dataclass
 class Camera:
-    """A pinhole camera, Blender's perspective camera with sensor fit and shift resolved.
+    """Blender's perspective or orthographic camera with sensor fit and shift resolved, and
+    its thin lens (depth of field) as Cycles models it.
 
     ``matrix`` is the 4x4 camera-to-world matrix (the camera looks along local -Z, +Y is up).
     ``tan_half_x``/``tan_half_y`` are the half extents of the full frame on the plane at unit
-    distance; ``shift_x``/``shift_y`` move the frame on that plane (same units). ``clip_start``
-    [m] is the seed's image-plane distance: nothing nearer is visible. ``resolution`` is the
-    full frame (width, height) in pixels; ``border`` = (x0, y0, x1, y1) in pixels, y from the
-    bottom like Blender, x1/y1 exclusive, selects the rendered window (the whole frame when
-    None).
+    distance (perspective), or in metres (``orthographic``: the frame is Orthographic Scale
+    wide on its fitted side); ``shift_x``/``shift_y`` move the frame on that plane (same
+    units). ``clip_start`` [m] is the seed's image-plane distance: nothing nearer is visible.
+    ``resolution`` is the full frame (width, height) in pixels; ``border`` = (x0, y0, x1, y1)
+    in pixels, y from the bottom like Blender, x1/y1 exclusive, selects the rendered window
+    (the whole frame when None).
+
+    Depth of field (off when ``aperture_radius`` is 0): rays leave a lens of radius
+    ``aperture_radius`` [m] in the camera's plane and meet on the plane ``focus_distance`` [m]
+    in front of it; ``aperture_blades`` >= 3 makes the lens a regular polygon turned by
+    ``aperture_rotation`` [rad], and ``aperture_ratio`` squeezes it horizontally (anamorphic
+    bokeh: the lens's x is divided by it), as Cycles' ``camera_sample_aperture`` does.
     """
 
     matrix: np.ndarray
@@ -366,11 +375,31 @@ class Camera:
     clip_end: float = 1e30
     border: tuple[int, int, int, int] | None = None
     name: str = "Camera"
+    orthographic: bool = False
+    aperture_radius: float = 0.0
+    focus_distance: float = 10.0
+    aperture_blades: int = 0
+    aperture_rotation: float = 0.0
+    aperture_ratio: float = 1.0
 
     def __post_init__(self):
         self.matrix = np.asarray(self.matrix, dtype=np.float64).reshape(4, 4)
         if not np.all(np.isfinite(self.matrix)):
             raise SceneError(f"{self.name}: transform is not finite")
+        self.orthographic = bool(self.orthographic)
+        if not (math.isfinite(self.aperture_radius) and self.aperture_radius >= 0):
+            raise SceneError(f"{self.name}: aperture radius {self.aperture_radius} m must be "
+                             f"zero (no depth of field) or positive")
+        if self.aperture_radius > 0:
+            if not (math.isfinite(self.focus_distance) and self.focus_distance > 0):
+                raise SceneError(f"{self.name}: focus distance {self.focus_distance} m must "
+                                 f"be positive for depth of field")
+            if not (math.isfinite(self.aperture_ratio) and self.aperture_ratio > 0):
+                raise SceneError(f"{self.name}: aperture ratio {self.aperture_ratio} must be "
+                                 f"positive")
+            if not math.isfinite(self.aperture_rotation):
+                raise SceneError(f"{self.name}: aperture rotation is not finite")
+        self.aperture_blades = int(self.aperture_blades)
         w, h = (int(v) for v in self.resolution)
         if w < 1 or h < 1:
             raise SceneError(f"{self.name}: resolution {w}x{h} must be at least 1x1")
@@ -390,6 +419,50 @@ class Camera:
     def window_size(self) -> tuple[int, int]:
         x0, y0, x1, y1 = self.border
         return x1 - x0, y1 - y0
+
+    @property
+    def position(self) -> np.ndarray:
+        """The camera's location [m] (for an orthographic camera, the centre of its plane)."""
+        return self.matrix[:3, 3].copy()
+
+    @property
+    def pixel_angle(self) -> float:
+        """A pixel's width at unit distance (perspective); 0 for an orthographic camera."""
+        return 0.0 if self.orthographic else 2.0 * self.tan_half_x / self.resolution[0]
+
+    @property
+    def pixel_width(self) -> float:
+        """A pixel's width [m] at any distance (orthographic); 0 for a perspective camera."""
+        return 2.0 * self.tan_half_x / self.resolution[0] if self.orthographic else 0.0
+
+    def footprint(self, distance) -> np.ndarray:
+        """The width [m] of a pixel seen at ``distance`` [m] from the camera (the pinhole's:
+        depth of field's blur is not counted, as Cycles' ray differentials do not count it)."""
+        return self.pixel_width + np.asarray(distance, np.float64) * self.pixel_angle
+
+    def to_camera_space(self, points) -> np.ndarray:
+        """(N, 3) world points [m] in the camera's frame (x right, y up, looking along -z)."""
+        m = self.matrix
+        rotation = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0)
+        return (np.asarray(points, np.float64).reshape(-1, 3) - m[:3, 3]) @ rotation
+
+    def rays_to(self, points):
+        """(origins, unit directions, distances [m]) of the pinhole's rays that end at each
+        world point: from the eye (perspective) or from the camera's plane along its axis
+        (orthographic)."""
+        p = np.asarray(points, np.float64).reshape(-1, 3)
+        if not self.orthographic:
+            eye = self.matrix[:3, 3]
+            d = p - eye
+            dist = np.linalg.norm(d, axis=1)
+            return (np.broadcast_to(eye, p.shape).copy(),
+                    d / np.maximum(dist, 1e-30)[:, None], dist)
+        m = self.matrix
+        rotation = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0)
+        depth = -self.to_camera_space(p)[:, 2]
+        axis = -rotation[:, 2]
+        origins = p - depth[:, None] * axis
+        return origins, np.broadcast_to(axis, p.shape).copy(), depth
 
     @classmethod
     def look_at(cls, eye, target, up=(0.0, 0.0, 1.0), fov_x_deg: float = 60.0,
