@@ -873,6 +873,76 @@ def test_camera_matches_world_to_camera_view(res, fit, aspect):
     assert np.ptp(theirs[:, 0]) > 0.5               # the points spread over the frame
 
 
+@pytest.mark.parametrize("res, fit", [((640, 400), "AUTO"), ((400, 640), "AUTO"),
+                                      ((640, 400), "VERTICAL")])
+def test_orthographic_camera_matches_world_to_camera_view(res, fit):
+    from lanterna.engine.passes import project_to_window
+
+    scene = reset()
+    cam = add_camera(scene, location=(1.0, -8.0, 3.0), rotation=(1.2, 0.1, 0.3))
+    cam.data.type = "ORTHO"
+    cam.data.ortho_scale = 7.5
+    cam.data.sensor_fit = fit
+    cam.data.shift_x, cam.data.shift_y = 0.2, -0.15
+    scene.render.resolution_x, scene.render.resolution_y = res
+    scene.render.resolution_percentage = 10
+    c = export().camera
+    assert c.orthographic and not any("orthographic" in w for w in export().warnings)
+    rng = np.random.default_rng(2)
+    cam_m = np.array(cam.matrix_world.normalized())
+    local = np.c_[rng.uniform(-3, 3, (40, 2)), rng.uniform(-9, -2, 40)]
+    points = local @ cam_m[:3, :3].T + cam_m[:3, 3]
+    theirs = np.array([world_to_camera_view(scene, cam, Vector(p))[:2] for p in points])
+    w, h = c.resolution
+    pixel, depth = project_to_window(c, points)
+    inside = (theirs[:, 0] > 0) & (theirs[:, 0] < 1) & (theirs[:, 1] > 0) & (theirs[:, 1] < 1)
+    assert inside.sum() > 10
+    expected = np.where(inside, (np.floor((1 - theirs[:, 1]) * h) * w
+                                 + np.floor(theirs[:, 0] * w)), -1).astype(int)
+    # Blender's projection and ours agree to the pixel (points within 1e-4 of a pixel edge
+    # may fall either side).
+    frac = np.abs(np.c_[theirs[:, 0] * w, theirs[:, 1] * h] % 1 - 0.5)
+    clear = np.all(frac < 0.4999, axis=1)
+    np.testing.assert_array_equal(pixel[clear], expected[clear])
+    np.testing.assert_allclose(depth, -local[:, 2], rtol=1e-6)
+
+
+def test_depth_of_field_is_read_as_cycles_reads_it():
+    scene = reset()
+    cam = add_camera(scene)                      # at (0, -10, 0) looking along +y
+    dof = cam.data.dof
+    cam.data.lens = 40.0
+    assert export().camera.aperture_radius == 0.0          # depth of field off
+    dof.use_dof = True
+    dof.aperture_fstop = 2.0
+    dof.focus_distance = 6.5
+    dof.aperture_blades = 0                     # a round lens (Blender makes 1 and 2 into 3)
+    dof.aperture_rotation = 0.4
+    dof.aperture_ratio = 1.5
+    c = export().camera
+    assert c.aperture_radius == pytest.approx(0.040 / (2 * 2.0))   # lens [m] / (2 F-stop)
+    assert c.focus_distance == pytest.approx(6.5)
+    assert c.aperture_blades == 0 and c.aperture_rotation == pytest.approx(0.4)
+    assert c.aperture_ratio == pytest.approx(1.5)
+    dof.aperture_blades = 7
+    assert export().camera.aperture_blades == 7
+    # A focus object: its distance along the camera's axis, not along the line of sight.
+    target = bpy.data.objects.new("Target", None)
+    scene.collection.objects.link(target)
+    target.location = (3.0, 2.0, 1.0)
+    dof.focus_object = target
+    assert export().camera.focus_distance == pytest.approx(12.0)
+    # Orthographic: the lens is 1 / (2 F-stop) metres (Cycles' convention).
+    cam.data.type = "ORTHO"
+    assert export().camera.aperture_radius == pytest.approx(0.25)
+    # Nothing can be in focus at distance 0: depth of field off, with a warning.
+    dof.focus_object = None
+    dof.focus_distance = 0.0
+    s = export()
+    assert s.camera.aperture_radius == 0.0
+    assert sum("Camera 'Camera'" in w and "depth of field is off" in w for w in s.warnings) == 1
+
+
 def test_border_and_resolution_override():
     scene = reset()
     add_camera(scene)

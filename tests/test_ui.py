@@ -43,9 +43,10 @@ ICONS = set(UILAYOUT.functions["label"].parameters["icon"].enum_items.keys())
 LAYOUT_ATTRIBUTES = set(UILAYOUT.properties.keys()) - {"rna_type"}
 WANTED_BUILTINS = ("RENDER_PT_format", "RENDER_PT_frame_range", "RENDER_PT_output",
                    "RENDER_PT_color_management", "DATA_PT_context_camera", "DATA_PT_camera",
-                   "DATA_PT_lens", "DATA_PT_context_light", "WORLD_PT_context_world",
+                   "DATA_PT_lens", "DATA_PT_camera_dof", "DATA_PT_camera_dof_aperture",
+                   "DATA_PT_context_light", "WORLD_PT_context_world",
                    "EEVEE_MATERIAL_PT_context_material")
-UNWANTED_BUILTINS = ("DATA_PT_light", "DATA_PT_spot", "DATA_PT_camera_dof", "DATA_PT_preview")
+UNWANTED_BUILTINS = ("DATA_PT_light", "DATA_PT_spot", "DATA_PT_preview")
 
 
 # -- A UILayout stand-in ----------------------------------------------------------------------

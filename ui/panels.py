@@ -738,12 +738,13 @@ classes = (
 
 
 # -- Blender's own panels ---------------------------------------------------------------------
-# Wanted whatever their COMPAT_ENGINES say: output, colour management, camera, material slots,
-# light and world data blocks.
+# Wanted whatever their COMPAT_ENGINES say: output, colour management, camera (with its depth
+# of field), material slots, light and world data blocks.
 _EXTRA_BUILTINS = {
     "RENDER_PT_format", "RENDER_PT_frame_range", "RENDER_PT_output", "RENDER_PT_stamp",
     "RENDER_PT_color_management", "RENDER_PT_color_management_curves",
     "DATA_PT_context_camera", "DATA_PT_camera", "DATA_PT_lens", "DATA_PT_camera_display",
+    "DATA_PT_camera_dof", "DATA_PT_camera_dof_aperture",
     "DATA_PT_context_light", "WORLD_PT_context_world", "EEVEE_MATERIAL_PT_context_material",
 }
 # BLENDER_RENDER panels that Lanterna replaces with its own or that cannot work for it: the

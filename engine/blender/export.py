@@ -94,13 +94,17 @@ animation already applied by Blender) and turns it into the renderer's inert sce
   is black. A new World in Blender 5 is grey 0.05 and Cycles adds it, so it is kept. A world
   that reads Light Path Is Camera Ray (to be seen in one colour and light in another) is read
   for camera rays and for all others: ``World.camera`` is what camera rays see.
-* **Camera**: the scene's active camera, perspective (orthographic and panoramic cameras are
-  reported and treated as perspective with the same lens and sensor). Blender's sensor fit:
-  AUTO fits Sensor Width to the larger side of the frame (in pixels x pixel aspect), HORIZONTAL
-  fits Sensor Width to the width, VERTICAL fits Sensor Height to the height. tan_half =
-  sensor / (2 lens) on the fitted side, the other side follows the frame's aspect. Shift X/Y
-  are in units of the fitted side (so the plane shift is shift x 2 tan_half of that side).
-  The camera matrix's scale is removed (as Cycles and ``world_to_camera_view`` do).
+* **Camera**: the scene's active camera, perspective or orthographic (panoramic and custom
+  cameras are reported and treated as perspective with the same lens and sensor). Blender's
+  sensor fit: AUTO fits Sensor Width to the larger side of the frame (in pixels x pixel
+  aspect), HORIZONTAL fits Sensor Width to the width, VERTICAL fits Sensor Height to the
+  height. tan_half = sensor / (2 lens) on the fitted side (orthographic: a half extent of
+  Orthographic Scale / 2 [m]), the other side follows the frame's aspect. Shift X/Y are in
+  units of the fitted side (so the plane shift is shift x 2 tan_half of that side). The
+  camera matrix's scale is removed (as Cycles and ``world_to_camera_view`` do). Depth of
+  field as Cycles reads it: aperture radius = lens [m] / (2 F-Stop) (orthographic: 1 / (2
+  F-Stop) m), Blades (fewer than 3: a disk), Rotation and Ratio; the focus distance is Focus
+  Distance, or with a Focus Object (and bone) the distance to it along the camera's axis.
 
 Parameters of :func:`export_scene`
 ----------------------------------
@@ -1366,14 +1370,17 @@ def _export_camera(depsgraph, scene, resolution, border, warn: _Warnings) -> Cam
     if border is None:
         border = render_border(render, (w, h))
 
-    if data.type != "PERSP":
+    orthographic = data.type == "ORTHO"
+    if data.type not in ("PERSP", "ORTHO"):
         warn(f"Camera '{name}': {data.type.lower()} cameras are not supported; rendered as "
              f"perspective with the same lens and sensor")
-    if getattr(getattr(data, "dof", None), "use_dof", False):
-        warn(f"Camera '{name}': depth of field is ignored")
     lens = float(data.lens)
     if not (lens > 0 and math.isfinite(lens)):
         raise SceneError(f"Camera '{name}': focal length {lens} mm must be positive")
+    ortho_scale = float(data.ortho_scale)
+    if orthographic and not (ortho_scale > 0 and math.isfinite(ortho_scale)):
+        raise SceneError(f"Camera '{name}': orthographic scale {ortho_scale} m must be positive")
+    lens_params = _camera_lens(depsgraph, cam_obj, data, matrix, orthographic, lens, warn)
 
     # Sensor fit (BKE_camera_params_compute_viewplane): frame size in pixels x pixel aspect.
     fx = w * float(render.pixel_aspect_x)
@@ -1385,7 +1392,7 @@ def _export_camera(depsgraph, scene, resolution, border, warn: _Warnings) -> Cam
         horizontal, sensor = True, float(data.sensor_width)
     else:
         horizontal, sensor = False, float(data.sensor_height)
-    half = sensor / (2.0 * lens)
+    half = 0.5 * ortho_scale if orthographic else sensor / (2.0 * lens)
     if horizontal:
         tan_x, tan_y = half, half * fy / fx
         unit = 2.0 * tan_x
@@ -1395,7 +1402,43 @@ def _export_camera(depsgraph, scene, resolution, border, warn: _Warnings) -> Cam
     return Camera(matrix=matrix, tan_half_x=tan_x, tan_half_y=tan_y, resolution=(w, h),
                   shift_x=float(data.shift_x) * unit, shift_y=float(data.shift_y) * unit,
                   clip_start=float(data.clip_start), clip_end=float(data.clip_end),
-                  border=None if border is None else tuple(int(v) for v in border), name=name)
+                  border=None if border is None else tuple(int(v) for v in border), name=name,
+                  orthographic=orthographic, **lens_params)
+
+
+def _camera_lens(depsgraph, cam_obj, data, matrix, orthographic, lens, warn) -> dict:
+    """The thin lens's ``scene.Camera`` fields from Blender's Depth of Field panel, as Cycles'
+    ``blender_camera_from_object`` and ``blender_camera_focal_distance`` read it; {} when
+    depth of field is off."""
+    dof = getattr(data, "dof", None)
+    name = cam_obj.name
+    if dof is None or not dof.use_dof:
+        return {}
+    fstop = max(float(dof.aperture_fstop), 1e-5)
+    radius = (1.0 if orthographic else lens * 1e-3) / (2.0 * fstop)
+    focus = float(dof.focus_distance)
+    target = dof.focus_object
+    if target is not None:
+        target_matrix = np.array(target.evaluated_get(depsgraph).matrix_world, np.float64)
+        bone_name = getattr(dof, "focus_subtarget", "")
+        pose = getattr(target, "pose", None)
+        if bone_name and pose is not None and bone_name in pose.bones:
+            target_matrix = target_matrix @ np.array(pose.bones[bone_name].matrix, np.float64)
+        focus = abs(float(np.dot(matrix[:3, 2], matrix[:3, 3] - target_matrix[:3, 3])))
+    ratio = float(dof.aperture_ratio)
+    if not (focus > 0 and math.isfinite(focus)):
+        where = f"its focus object '{target.name}' lies in its plane" if target is not None \
+            else f"focus distance {focus:g} m"
+        warn(f"Camera '{name}': depth of field is off: {where}, so nothing could be in focus "
+             f"(Cycles' picture is undefined)")
+        return {}
+    if not (ratio > 0 and math.isfinite(ratio)):
+        warn(f"Camera '{name}': aperture ratio {ratio:g} is not positive; 1 is used")
+        ratio = 1.0
+    blades = int(dof.aperture_blades)
+    return dict(aperture_radius=radius, focus_distance=focus,
+                aperture_blades=blades if blades >= 3 else 0,
+                aperture_rotation=float(dof.aperture_rotation), aperture_ratio=ratio)
 
 
 # ---------------------------------------------------------------------------------------------
