@@ -40,14 +40,20 @@ Global illumination (``GI_SCENES``, for the all-bounce references of ``make_cycl
   University data page, in millimetres, its light quad an Emission mesh (strength 50) 0.1 mm
   under the ceiling and in view, 64 x 64 (``CORNELL_MM_*`` below).
 
-Only ``bpy`` and ``mathutils``: no import of Lanterna, so the reference script can use it
-without the add-on.
+Cameras (in ``SCENES``): ``sun_ortho`` is ``sun`` through an orthographic camera and
+``sun_dof`` is ``sun`` with depth of field (a focus object, six blades). ``CAMERA_SCENES``
+holds ``bokeh``, two out-of-focus emitters in frame whose images are the lens's shape,
+compared through ``bokeh_moments`` rather than block means.
+
+Only ``bpy``, ``mathutils`` and numpy: no import of Lanterna, so the reference script can use
+it without the add-on.
 """
 from __future__ import annotations
 
 import math
 
 import bpy
+import numpy as np
 from mathutils import Vector
 
 RESOLUTION = (64, 48)
@@ -285,6 +291,91 @@ def world():
     return scene
 
 
+def sun_ortho():
+    """``sun`` seen through an orthographic camera: Orthographic Scale 6 m on the wider side,
+    Shift X 0.08 and Y -0.05 (in units of that side), from the same place and direction."""
+    scene = sun()
+    cam = scene.camera.data
+    cam.type = "ORTHO"
+    cam.ortho_scale = 6.0
+    cam.shift_x, cam.shift_y = 0.08, -0.05
+    return scene
+
+
+def _focus_on(scene, location):
+    """An empty at ``location`` as the camera's Focus Object; depth of field on."""
+    target = bpy.data.objects.new("Focus", None)
+    scene.collection.objects.link(target)
+    target.location = location
+    dof = scene.camera.data.dof
+    dof.use_dof = True
+    dof.focus_object = target
+    return dof
+
+
+def sun_dof():
+    """``sun`` with depth of field: focused on the box's centre (an empty as Focus Object,
+    5.5 m along the camera's axis), F-Stop 0.04 (a lens of radius 0.48 m: the near floor blurs
+    by about 5 pixels, the wall by 1), six blades turned by 15 degrees."""
+    scene = sun()
+    dof = _focus_on(scene, (0.3, 0.2, 0.4))
+    dof.aperture_fstop = 0.04
+    dof.aperture_blades = 6
+    dof.aperture_rotation = math.radians(15.0)
+    return scene
+
+
+def bokeh():
+    """Two out-of-focus emitters on a black world: their images are the lens's shape (five
+    blades turned by 20 degrees, Ratio 1.4: squeezed horizontally), scaled by how far each is
+    from the focus plane, and turned over for the near one. Camera at the origin looking
+    along +y (Focal Length 50 mm, Sensor Width 36 mm), focused by an empty 3 m ahead, F-Stop
+    0.05 (lens radius 0.5 m). Emission strength 20, colour (1, 0.8, 0.6): a 0.4 m square 9 m
+    away on the left (``BOKEH_REGIONS["far"]``, about 4 px across, blurred to about 20 px
+    tall) and a 0.05 m square 1.5 m away on the right (``"near"``, about 3 px, blurred to
+    about 30 px)."""
+    scene = _reset()
+    data = bpy.data.cameras.new("Camera")
+    data.lens, data.sensor_width, data.sensor_fit = 50.0, 36.0, "AUTO"
+    cam = bpy.data.objects.new("Camera", data)
+    scene.collection.objects.link(cam)
+    cam.rotation_euler = (math.pi / 2, 0.0, 0.0)             # -Z towards +y, +Y up
+    scene.camera = cam
+    dof = _focus_on(scene, (0.5, 3.0, 0.2))
+    dof.aperture_fstop = 0.05
+    dof.aperture_blades = 5
+    dof.aperture_rotation = math.radians(20.0)
+    dof.aperture_ratio = 1.4
+    mat = _material_emission("Emitter", (1.0, 0.8, 0.6), 20.0)
+    for name, half, location in (("Far", 0.2, (-0.9, 9.0, 0.0)), ("Near", 0.025, (0.25, 1.5, 0.0))):
+        quad = [(-half, 0, -half), (half, 0, -half), (half, 0, half), (-half, 0, half)]
+        _mesh_object(name, quad, [(0, 1, 2, 3)], mat).location = location
+    return scene
+
+
+# Window columns holding each emitter's image in ``bokeh`` (at 64 x 48).
+BOKEH_REGIONS = {"far": (0, 32), "near": (32, 64)}
+BOKEH_BLADES, BOKEH_RATIO = 5, 1.4
+
+
+def bokeh_moments(image, columns, blades=BOKEH_BLADES, ratio=BOKEH_RATIO) -> dict:
+    """Moments of the red channel of an (H, W, 3) image (row 0 = top) over ``columns``
+    [start, stop): ``flux`` (the sum), centroid ``cx``, ``cy`` [px], central second moments
+    ``xx``, ``yy`` [px^2], and ``turn`` [degrees]: the phase of the blades-fold angular moment
+    sum(I z^blades) / blades, z = (ratio dx, -dy) (the squeeze undone, y up), which tells the
+    polygon's orientation (360 / blades degrees apart are the same)."""
+    im = np.asarray(image, np.float64)[:, columns[0]:columns[1], 0]
+    y, x = np.mgrid[:im.shape[0], :im.shape[1]]
+    flux = im.sum()
+    cx, cy = (im * x).sum() / flux, (im * y).sum() / flux
+    dx, dy = x - cx, y - cy
+    z = ratio * dx - 1j * dy
+    turn = np.degrees(np.angle((im * z ** blades).sum())) / blades
+    return {"flux": float(flux), "cx": float(cx + columns[0]), "cy": float(cy),
+            "xx": float((im * dx * dx).sum() / flux), "yy": float((im * dy * dy).sum() / flux),
+            "turn": float(turn)}
+
+
 SCENES = {
     "point": point,
     "sun": sun,
@@ -296,7 +387,11 @@ SCENES = {
     "area_disk_collimated": area_disk_collimated,
     "emission_mesh": emission_mesh,
     "world": world,
+    "sun_ortho": sun_ortho,
+    "sun_dof": sun_dof,
 }
+# Scenes for the camera's lens alone (their emitters are in frame on purpose).
+CAMERA_SCENES = {"bokeh": bokeh}
 
 
 # --- global illumination ------------------------------------------------------------------
@@ -446,9 +541,9 @@ GI_SCENES = {
 
 
 def build(name: str):
-    """Build scene ``name`` (of ``SCENES`` or ``GI_SCENES``) into a fresh file and return the
-    bpy scene."""
-    scene = (SCENES[name] if name in SCENES else GI_SCENES[name])()
+    """Build scene ``name`` (of ``SCENES``, ``CAMERA_SCENES`` or ``GI_SCENES``) into a fresh
+    file and return the bpy scene."""
+    scene = {**SCENES, **CAMERA_SCENES, **GI_SCENES}[name]()
     bpy.context.view_layer.update()
     return scene
 

@@ -33,6 +33,10 @@ of the image). Written to ``tests/data/cycles_direct/``:
 ``conventions.json``
     the measured Cycles conventions (``--conventions``), see ``tests/data/README.md``.
 
+The camera scene ``bokeh`` (``parity_scenes.CAMERA_SCENES``: emitters in frame on purpose) is
+made the same way and also stores ``seed_moments`` (JSON: per seed, per emitter,
+``parity_scenes.bokeh_moments``).
+
 Global illumination (``--gi``): the same, with all bounces, into ``tests/data/cycles_gi/``
 (``<scene>.npz`` with the same fields and ``manifest.json``, which adds each scene's
 resolution and builder). Scenes ``GI_SCENES``: ``scene1``, the seed's Scene 1
@@ -83,6 +87,7 @@ SEEDS = (1, 2, 3, 4)
 DEFAULT_SAMPLES = 1024
 SAMPLES = {          # per seed; every bright block's relative SE comes out < 0.1 %
     "world": 4096,
+    "bokeh": 4096,   # its moments' seed-to-seed spread: 0.3 % at 1024
 }
 
 # --gi: all bounces, written to cycles_gi/
@@ -259,6 +264,9 @@ def make_reference(name: str, tmpdir: str, gi: bool = False, reuse_dir=None) -> 
     for seed in seeds:
         if gi:
             scene, builder = _build_gi(name)
+        elif name in parity_scenes.CAMERA_SCENES:     # emitters in frame on purpose
+            scene = parity_scenes.build(name)
+            builder = f"tests/parity_scenes.py:{parity_scenes.CAMERA_SCENES[name].__name__}"
         else:
             scene = parity_scenes.build(name)
             builder = f"tests/parity_scenes.py:{parity_scenes.SCENES[name].__name__}"
@@ -290,10 +298,15 @@ def make_reference(name: str, tmpdir: str, gi: bool = False, reuse_dir=None) -> 
                     rendered_at=[w * factor, h * factor],
                     region_se_from="per-pixel variance" if k < 4 else "spread of the seeds")
     out.mkdir(parents=True, exist_ok=True)
+    extra = {}
+    if name == "bokeh":          # per seed, per emitter: parity_scenes.bokeh_moments
+        extra["seed_moments"] = json.dumps(
+            [{part: parity_scenes.bokeh_moments(r, cols)
+              for part, cols in parity_scenes.BOKEH_REGIONS.items()} for r in renders])
     np.savez_compressed(
         out / f"{name}.npz", image=image.astype(np.float32), region_mean=region_mean,
         region_se=region_se, region_se_pixels=region_se_pixels, seed_region_means=seed_blocks,
-        grid=np.array(GRID), settings=json.dumps(settings))
+        grid=np.array(GRID), settings=json.dumps(settings), **extra)
     peak = float(region_mean.max())
     bright = region_mean >= 0.05 * peak
     rel_se = np.where(bright, region_se / np.maximum(region_mean, 1e-30), 0.0)
@@ -310,6 +323,7 @@ def make_reference(name: str, tmpdir: str, gi: bool = False, reuse_dir=None) -> 
         "max_abs_se_dark_regions_over_peak": float(
             f"{(np.where(bright, 0, region_se).max() / peak):.3g}"),
         "max_seed_to_seed_block_spread_over_peak": float(f"{spread:.3g}"),
+        "blender": bpy.app.version_string,
     }
     if gi:
         summary["resolution"] = [w, h]
@@ -743,16 +757,19 @@ def main(argv=None):
                               "made_by": "tests/data/make_cycles_refs.py --conventions"}
             (OUT / "conventions.json").write_text(json.dumps(table, indent=1) + "\n")
             return
-        names = args.scenes or list(parity_scenes.SCENES)
-        unknown = [n for n in names if n not in parity_scenes.SCENES]
+        known = list(parity_scenes.SCENES) + list(parity_scenes.CAMERA_SCENES)
+        names = args.scenes or known
+        unknown = [n for n in names if n not in known]
         if unknown:
-            parser.error(f"unknown scenes {unknown}; known: {list(parity_scenes.SCENES)}")
+            parser.error(f"unknown scenes {unknown}; known: {known}")
         manifest_path = OUT / "manifest.json"
         manifest = json.loads(manifest_path.read_text()) if manifest_path.exists() else {}
         for name in names:
             manifest[name] = make_reference(name, tmpdir)
+        versions = {entry.get("blender", "5.0.1") for key, entry in manifest.items()
+                    if not key.startswith("_")}
         manifest["_meta"] = {
-            "blender": bpy.app.version_string, "grid": list(GRID), "seeds": list(SEEDS),
+            "blender": ", ".join(sorted(versions)), "grid": list(GRID), "seeds": list(SEEDS),
             "resolution": list(parity_scenes.RESOLUTION),
             "made_by": "tests/data/make_cycles_refs.py"}
         manifest_path.write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n")
