@@ -287,7 +287,7 @@ def render_camera(context: CameraContext, wanted_parts, pool, progress=None, can
     t0 = time.perf_counter()
     if not skip:
         context = replace(context, edges=emitter_edges(scene, context.accel, context.surfaces,
-                                                       settings.filter_width))
+                                                       settings.filter_width, context.lights))
     tell(f"{label}: 0/{len(blocks)} batches")
     pending = {}
     queue = [] if skip else list(reversed(blocks))
@@ -390,8 +390,9 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera, subset=
     probes = None
     ray_of = np.arange(count)
     # Rays after a bounce see the lights that are not geometry (area lights, lights with a
-    # radius: ``lights.ray_visible``).
+    # radius: ``lights.ray_visible``); camera rays those with Visibility > Camera on.
     ray_lights = any(ray_visible(light) for light in context.lights.sampled)
+    camera_lights = _lights_in_frame(context.lights)
     # Where the world's or a material's nodes tell camera rays apart (``World.camera``,
     # Light Path Is Camera Ray), each ray after the first hit carries whether it is still a
     # camera ray: it went on straight through transparent surfaces only, which keep Cycles'
@@ -424,6 +425,19 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera, subset=
         stats["trace_seconds"] += time.perf_counter() - t0
         stats["camera_rays" if depth == 0 else "specular_rays"] += len(origins)
         hit = prim >= 0
+        if depth == 0 and camera_lights:
+            # Lights in frame, as Cycles draws them: their radiance adds to the pixel and the
+            # ray goes on (a light is not a surface). Nothing else samples them from here.
+            glint = seen_light_radiance(context.lights, origins, directions,
+                                        np.where(hit, _t, np.inf), camera=True)
+            seen = np.flatnonzero(glint.any(axis=1))
+            if len(seen):
+                value = glint[seen]
+                if own_emission is not None:         # edge pixels: ``edge_emission`` has it
+                    value = value * own_emission[ray_of[seen]][:, None]
+                add_to_pixels(emission_sums, ray_of[seen] // spp, value)
+                if light is not None:
+                    light.add_seen(ray_of[seen], value, world=False)
         if depth > 0 and ray_lights:
             # Area lights and lights with a radius seen after a bounce: after a mirror or
             # smooth glass their glint (no light sample reaches them through a delta lobe),
@@ -805,9 +819,10 @@ def _box_3x3(values: np.ndarray) -> np.ndarray:
     return sum(padded[i:i + h, j:j + w] for i in range(3) for j in range(3)) / 9.0
 
 
-def emitter_edges(scene, accel, surfaces, filter_width: float):
+def emitter_edges(scene, accel, surfaces, filter_width: float, lights=None):
     """(height, width) bool over the full frame, row 0 at the top: the pixels whose filter
-    footprint may hold an edge of an emitter seen by the camera, or None (no emission).
+    footprint may hold an edge of an emitter or of a light in frame (``lights``: the scene's
+    ``LightSet``) seen by the camera, or None (no emission, no light in frame).
 
     An emitter is far brighter than what lies beside it (the Cornell box's light quad: 50
     against 0.2-0.5), so the share of a pixel's samples that land on it decides the pixel:
@@ -824,13 +839,15 @@ def emitter_edges(scene, accel, surfaces, filter_width: float):
     centres of the (2r + 1)^2 pixels around it, r = ceil(filter_width) + 1 (the filter
     reaches filter_width pixels out). An emitter thinner than a pixel that no centre meets
     keeps the ordinary samples. Over the full frame, so tiles of a still choose alike."""
-    if not surfaces.materials.has_emission:
+    lights = lights if _lights_in_frame(lights) else None
+    if not surfaces.materials.has_emission and lights is None:
         return None
     cam = replace(scene.camera, border=None)
     width, height = cam.window_size
     origins, directions, tmax = pixel_rays(cam, 0, width * height, 1, np.random.default_rng(0),
                                            centres=True)
-    value = _seen_emission(scene, accel, surfaces, origins, directions, tmax).sum(axis=1)
+    value = _seen_emission(scene, accel, surfaces, origins, directions, tmax,
+                           lights=lights).sum(axis=1)
     img = value.reshape(height, width)
     r = int(np.ceil(filter_width)) + 1
     pad = np.pad(img, r, mode="edge")
@@ -859,17 +876,32 @@ def world_along(world, directions: np.ndarray, camera) -> np.ndarray | None:
     return out
 
 
-def _seen_emission(scene, accel, surfaces, origins, directions, tmax, split=False):
+def _lights_in_frame(lights) -> bool:
+    """Whether camera rays can see any of ``lights`` (a ``LightSet`` or None): lights that
+    are not geometry, with Visibility > Camera on."""
+    return lights is not None and any(ray_visible(light) and light.camera_visible
+                                      for light in lights.sampled)
+
+
+def _seen_emission(scene, accel, surfaces, origins, directions, tmax, split=False,
+                   lights=None):
     """Radiance (N, 3) the camera rays see first: an emitter's (on its emitting side, as a
-    camera ray meets it) or the world's where they miss; 0 on other surfaces. ``split``:
-    also the world's part alone."""
+    camera ray meets it) or the world's where they miss; 0 on other surfaces; plus the
+    lights in frame they pass (``lights``: the scene's ``LightSet``, camera-visible lights
+    that are not geometry). ``split``: also the world's part alone."""
     _t, prim, bu, bv = accel.intersect(origins, directions, tmax)
     out = np.zeros((len(origins), 3))
     hit = prim >= 0
+    world_part = np.zeros((len(origins), 3)) if split else None
     if not hit.all():
         world = world_along(scene.world, directions[~hit], True)
         if world is not None:
             out[~hit] = world
+            if split:
+                world_part[~hit] = world
+    if lights is not None:
+        out += seen_light_radiance(lights, origins, directions, np.where(hit, _t, np.inf),
+                                   camera=True)
     if hit.any():
         p = prim[hit]
         front = sampling.dot_rows(np.take(surfaces.geometric_normals, p, axis=0),
@@ -878,7 +910,7 @@ def _seen_emission(scene, accel, surfaces, origins, directions, tmax, split=Fals
                                   ray={"Ray Length": _t[hit]})
         out[hit] = surface.emitted_radiance * (front | surface.both_sides)[:, None]
     if split:
-        return out, np.where(hit[:, None], 0.0, out)
+        return out, world_part
     return out
 
 
@@ -936,8 +968,9 @@ def edge_emission(context: CameraContext, camera, batch: int, pixels: np.ndarray
     rng = sampling.rng_for(settings.seed, sampling.STREAM_EDGE, batch)
     origins, directions, tmax = pixel_rays(camera, 0, 0, m, rng, settings.filter_width,
                                            pixels=pixels)
+    lights = context.lights if _lights_in_frame(context.lights) else None
     seen = _seen_emission(context.scene, context.accel, context.surfaces, origins, directions,
-                          tmax, split)
+                          tmax, split, lights=lights)
     if split:
         seen, world = (a.reshape(len(pixels), m, 3).mean(axis=1) for a in seen)
         return (seen, world), len(origins)

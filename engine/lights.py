@@ -161,6 +161,7 @@ class TriangleEmitter:
     ``textured_emitters``); triangles are sampled in proportion to their factor."""
 
     kind = "mesh"
+    camera_visible = False       # a rectangle light's Visibility > Camera (``ray_visible``)
 
     def __init__(self, name: str, triangles: np.ndarray, radiance: np.ndarray, two_sided: bool,
                  in_bvh: bool = False, scale: np.ndarray | None = None, radiance_at=None):
@@ -532,6 +533,7 @@ class EllipseEmitter:
 
     def __init__(self, light: AreaLight):
         self.name = light.name
+        self.camera_visible = light.camera_visible
         self.center = light.center
         self.du, self.dv = light.axis_u, light.axis_v
         self.normal = light.normal
@@ -645,6 +647,7 @@ class SphereLight:
 
     def __init__(self, light):
         self.name = light.name
+        self.camera_visible = bool(getattr(light, "camera_visible", False))
         self.center = np.asarray(light.position, np.float64)
         self.radius = float(light.radius)
         self.sphere = not light.soft_falloff
@@ -1157,6 +1160,7 @@ class LightSet:
                     self.sampled.append(EllipseEmitter(light))
                 if not light.collimated:   # the per-light switch read by shadow_photons.py
                     self.sampled[-1].shadow_photons = light.shadow_photons
+                    self.sampled[-1].camera_visible = light.camera_visible
         self.points_pos = np.array(self.points_pos, np.float64).reshape(-1, 3)
         self.points_intensity = np.array(self.points_intensity, np.float64).reshape(-1, 3)
 
@@ -1296,7 +1300,8 @@ def ray_visible(light) -> bool:
         (isinstance(light, TriangleEmitter) and not light.in_bvh)
 
 
-def seen_light_radiance(lights_or_scene, origins, directions, t_hit, with_index=False):
+def seen_light_radiance(lights_or_scene, origins, directions, t_hit, with_index=False,
+                        camera=False):
     """Radiance (N, 3) [W m^-2 sr^-1] of the lights that are not geometry but that rays
     (``origins`` (N, 3), unit ``directions`` (N, 3)) meet before ``t_hit`` (N,) (np.inf where
     the ray left the scene; ``ray_visible``: point / spot lights with a radius, a spot's mask
@@ -1304,8 +1309,9 @@ def seen_light_radiance(lights_or_scene, origins, directions, t_hit, with_index=
     on their emitting side); the nearest light wins; 0 elsewhere. ``lights_or_scene``: a
     ``LightSet`` or a ``Scene``. For camera paths after a delta (mirror, smooth glass)
     bounce, where no light sample could reach the light, and after glossy bounces (weighted
-    against light samples). ``with_index``: also the index (N,) in ``sampled`` of the light
-    each ray sees (-1: none)."""
+    against light samples), and for camera rays (``camera``: only the lights whose
+    ``camera_visible`` is on, Blender's Visibility > Camera). ``with_index``: also the index
+    (N,) in ``sampled`` of the light each ray sees (-1: none)."""
     lights = lights_or_scene if isinstance(lights_or_scene, LightSet) else LightSet(lights_or_scene)
     o = np.asarray(origins, np.float64).reshape(-1, 3)
     w = np.asarray(directions, np.float64).reshape(-1, 3)
@@ -1313,7 +1319,7 @@ def seen_light_radiance(lights_or_scene, origins, directions, t_hit, with_index=
     out = np.zeros((len(o), 3))
     index = np.full(len(o), -1)
     for li, light in enumerate(lights.sampled):
-        if not ray_visible(light):
+        if not ray_visible(light) or (camera and not light.camera_visible):
             continue
         t, factor = light.intersect(o, w, best)
         nearer = t < best

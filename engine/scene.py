@@ -147,6 +147,8 @@ class PointLight:
     * ``soft_falloff`` True (default, Blender's Soft Falloff default): a disk of radius R
       facing each shading point, so E = Phi cos(theta) / (4 pi (d^2 + R^2)) on its axis.
     Both cast soft shadows. ``soft_falloff`` is ignored when ``radius`` is 0.
+    ``camera_visible`` (Blender's Visibility > Camera; off by default, as for a new light in
+    Blender): camera rays see a light with a radius, as in Cycles.
     """
 
     name: str
@@ -155,6 +157,7 @@ class PointLight:
     photon_share: float = 1.0
     radius: float = 0.0
     soft_falloff: bool = True
+    camera_visible: bool = False
 
     def __post_init__(self):
         self.position = _vec3(self.position, self.name, "position")
@@ -162,6 +165,7 @@ class PointLight:
         self.photon_share = _share(self.photon_share, self.name)
         self.radius = _radius(self.radius, self.name)
         self.soft_falloff = bool(self.soft_falloff)
+        self.camera_visible = bool(self.camera_visible)
 
 
 @dataclass
@@ -185,11 +189,13 @@ class SpotLight:
     photon_share: float = 1.0
     radius: float = 0.0
     soft_falloff: bool = True
+    camera_visible: bool = False
 
     def __post_init__(self):
         self.photon_share = _share(self.photon_share, self.name)
         self.radius = _radius(self.radius, self.name)
         self.soft_falloff = bool(self.soft_falloff)
+        self.camera_visible = bool(self.camera_visible)
         self.position = _vec3(self.position, self.name, "position")
         self.direction = _unit(self.direction, self.name, "direction")
         self.flux = _rgb(self.flux, self.name, "flux")
@@ -233,7 +239,9 @@ class AreaLight:
     seed's circular directional light (Eq. 7.2), all light along the normal.
     ``shadow_photons`` False keeps shadow photons (seed 7.2, 9.6) from leaving this light:
     its points are not classified and every shadow ray to it is traced (Blender's
-    ``Light.lanterna.shadow_photons``).
+    ``Light.lanterna.shadow_photons``). ``camera_visible`` (Blender's Visibility > Camera,
+    off by default as for a new light in Blender): camera rays see the light's emitting side,
+    as in Cycles.
     """
 
     name: str
@@ -245,10 +253,12 @@ class AreaLight:
     collimated: bool = False
     photon_share: float = 1.0
     shadow_photons: bool = True
+    camera_visible: bool = False
 
     def __post_init__(self):
         self.photon_share = _share(self.photon_share, self.name)
         self.shadow_photons = bool(self.shadow_photons)
+        self.camera_visible = bool(self.camera_visible)
         self.matrix = np.asarray(self.matrix, dtype=np.float64).reshape(4, 4)
         if not np.all(np.isfinite(self.matrix)):
             raise SceneError(f"{self.name}: transform is not finite")

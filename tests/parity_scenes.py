@@ -43,7 +43,8 @@ Global illumination (``GI_SCENES``, for the all-bounce references of ``make_cycl
 Cameras (in ``SCENES``): ``sun_ortho`` is ``sun`` through an orthographic camera and
 ``sun_dof`` is ``sun`` with depth of field (a focus object, six blades). ``CAMERA_SCENES``
 holds ``bokeh``, two out-of-focus emitters in frame whose images are the lens's shape,
-compared through ``bokeh_moments`` rather than block means.
+compared through ``bokeh_moments`` rather than block means, and ``lights_in_frame``, lights
+the camera sees (one of them with Visibility > Camera off), compared by the block rule.
 
 Only ``bpy``, ``mathutils`` and numpy: no import of Lanterna, so the reference script can use
 it without the add-on.
@@ -353,6 +354,24 @@ def bokeh():
     return scene
 
 
+def lights_in_frame():
+    """Lights the camera sees, as Cycles draws them: a disk area light (0.7 m, 150 W) and a
+    point light of radius 0.2 m (Soft Falloff, 200 W) in frame, turned towards the camera,
+    with Visibility > Camera on, and a square area light (0.5 m, 50 W) in frame with it off,
+    as Blender makes a new light (it lights the room but is not drawn). The box and the room as in the other scenes."""
+    scene = _reset()
+    _room(scene)
+    eye = (0.0, -5.0, 2.2)
+    disk = _light(scene, "Disk", "AREA", (-1.6, 0.5, 2.2), target=eye, shape="DISK", size=0.7,
+                  energy=150.0)
+    bulb = _light(scene, "Bulb", "POINT", (1.2, 0.8, 1.9), energy=200.0, shadow_soft_size=0.2)
+    hidden = _light(scene, "Hidden", "AREA", (0.0, 1.0, 2.6), target=eye, shape="SQUARE",
+                    size=0.5, energy=50.0)
+    disk.visible_camera = bulb.visible_camera = True     # a new light's is off
+    hidden.visible_camera = False
+    return scene
+
+
 # Window columns holding each emitter's image in ``bokeh`` (at 64 x 48).
 BOKEH_REGIONS = {"far": (0, 32), "near": (32, 64)}
 BOKEH_BLADES, BOKEH_RATIO = 5, 1.4
@@ -391,7 +410,7 @@ SCENES = {
     "sun_dof": sun_dof,
 }
 # Scenes for the camera's lens alone (their emitters are in frame on purpose).
-CAMERA_SCENES = {"bokeh": bokeh}
+CAMERA_SCENES = {"bokeh": bokeh, "lights_in_frame": lights_in_frame}
 
 
 # --- global illumination ------------------------------------------------------------------

@@ -572,7 +572,8 @@ def add_light(scene, name, kind, location=(0.0, 0.0, 0.0), rotation=(0.0, 0.0, 0
 def test_light_conversion():
     scene = reset()
     add_camera(scene)
-    point, _ = add_light(scene, "Point", "POINT", location=(1.0, 2.0, 3.0))
+    point, point_obj = add_light(scene, "Point", "POINT", location=(1.0, 2.0, 3.0))
+    point_obj_visible = point_obj.visible_camera     # as Blender made it
     point.energy = 100.0
     point.color = (1.0, 0.5, 0.25)
     point.shadow_soft_size = 0.0
@@ -600,7 +601,8 @@ def test_light_conversion():
     area.spread = 0.0
     area_obj.scale = (1.0, 2.0, 1.0)
 
-    disk, _ = add_light(scene, "Disk", "AREA", location=(0, 0, 3))
+    disk, disk_obj = add_light(scene, "Disk", "AREA", location=(0, 0, 3))
+    disk_obj.visible_camera = True              # Visibility > Camera (off for a new light)
     disk.shape = "DISK"
     disk.size = 1.0
     disk.energy = 10.0
@@ -655,6 +657,8 @@ def test_light_conversion():
     np.testing.assert_allclose(dk.power, 10.0 * math.pi * 0.25 if has_normalize else 10.0,
                                rtol=1e-6)
     assert any("'Disk'" in w and "Spread 90" in w for w in s.warnings)
+    assert dk.camera_visible and not ar.camera_visible
+    assert p.camera_visible == point_obj_visible
 
 
 def light_emission_node(light):

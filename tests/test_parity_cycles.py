@@ -162,7 +162,7 @@ def render_lanterna(name):
     return images, (spp, light)
 
 
-@pytest.mark.parametrize("name", list(parity_scenes.SCENES))
+@pytest.mark.parametrize("name", list(parity_scenes.SCENES) + ["lights_in_frame"])
 def test_direct_light_matches_cycles(name):
     ref = load_reference(name)
     grid = tuple(int(v) for v in ref["grid"])

@@ -85,6 +85,8 @@ animation already applied by Blender) and turns it into the renderer's inert sce
   - Zero power is skipped silently; negative power is skipped with a warning.
   - ``Light.lanterna``: ``photon_share`` goes onto every light; ``shadow_photons`` onto area
     lights (the only ones shadow photons leave).
+  - The object's Visibility > Camera (``visible_camera``, off for a new light) becomes
+    ``camera_visible`` of point, spot and area lights: camera rays see them, as in Cycles.
 * **World**: Background <- Environment Texture (<- Mapping <- Texture Coordinate) or Sky
   Texture: an image environment (``world_export.environment_of``); area lights with
   Cycles' ``is_portal`` become its portals, not lights. Otherwise a uniform environment of
@@ -1573,6 +1575,8 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
                     light.photon_share = float(settings.photon_share)
                     if isinstance(light, AreaLight):   # the only lights shadow photons leave
                         light.shadow_photons = bool(getattr(settings, "shadow_photons", True))
+                if hasattr(light, "camera_visible"):     # Object > Visibility > Camera
+                    light.camera_visible = bool(getattr(obj, "visible_camera", False))
                 lights.append(light)
         elif otype == "MESH":
             if parent is not None:
