@@ -19,6 +19,8 @@ animation already applied by Blender) and turns it into the renderer's inert sce
   Output: ``triangles`` (T, 3, 3) float32 [m], ``shading_normals`` (T, 3, 3) float32,
   ``material_ids`` (T,) int32 into ``materials``, ``object_ids`` (T,) int32 into
   ``object_names``.
+* **Objects hidden from the camera** (Visibility > Camera off): their materials' variants
+  (``hidden_from_camera``) let camera rays through and meet every other ray as before.
 * **Materials** (one per Blender material, deduplicated; slots without a material and objects
   without slots share ``default_surface``: Cycles' default Principled BSDF from Blender 5.0
   on, a grey diffuse of rho_d = 0.8 before): when the material has a
@@ -1100,6 +1102,38 @@ def material_from_nodes(mat, warn=None, images: dict | None = None,
                     shading_normal=shading_normal)
 
 
+# The Light Path node that a camera-hidden object's materials read (``hidden_from_camera``).
+HIDDEN_NODE = "Lanterna: Visibility > Camera off"
+
+
+def hidden_from_camera(material: Material) -> Material:
+    """``material`` as an object whose Visibility > Camera is off shows it: camera rays go
+    straight on through it (Cycles leaves such an object out of their intersections), every
+    other ray meets it as before. Made as Cycles would render Mix(the material, Transparent
+    white, Fac = Light Path Is Camera Ray): its closures take the factor 1 - Is Camera Ray and
+    a white Transparent closure the factor Is Camera Ray, read from a Light Path node added to
+    a copy of its graph. A material without closures (its radiometric values set by hand, or
+    no nodes) gets the closures those values stand for (diffuse, sharp glossy, emission)."""
+    closures = list(material.closures)
+    if not closures:
+        closures = [Closure("diffuse", params={"color": material.diffuse, "roughness": 0.0})]
+        if np.any(material.specular > 0):
+            closures.append(Closure("glossy", params={"color": material.specular,
+                                                      "roughness": 0.0}))
+        if np.any(material.exitance > 0):
+            closures.append(Closure("emission", params={"radiance": material.exitance / math.pi}))
+    graph = material.graph
+    graph = nodes.Graph(dict(graph.nodes), dict(graph.links), dict(graph.images)) \
+        if graph is not None else nodes.Graph()
+    graph.nodes[HIDDEN_NODE] = nodes.Node("ShaderNodeLightPath", HIDDEN_NODE, {}, {},
+                                          {k: "VALUE" for k in nodes.LIGHT_PATH_CAMERA})
+    socket = (HIDDEN_NODE, "Is Camera Ray")
+    clear = Closure("transparent", params={"color": np.ones(3)}, node=HIDDEN_NODE)
+    closures = ([_weighted(c, socket + (textures.COMPLEMENT,), 1.0) for c in closures]
+                + [_weighted(clear, socket, 0.0)])
+    return dataclasses.replace(material, closures=tuple(closures), graph=graph)
+
+
 class _UnsetPrincipled:
     """A Principled BSDF node with no sockets: every input reads its default."""
 
@@ -1481,21 +1515,22 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
 
     materials: list[Material] = []
     images: dict = {}                       # image name -> nodes.Image, read once
-    material_index: dict[int, int] = {}     # Blender material pointer -> index
-    default_id: list[int] = []              # index of the default grey, created on demand
+    converted: dict = {}        # Blender material pointer (None: no material) -> Material
+    material_index: dict = {}   # (that key, hidden from the camera) -> index in ``materials``
     baker = node_bake.NodeBaker(depsgraph)  # Cycles bakes of unsupported node subtrees
 
-    def material_id(mat) -> int:
-        if mat is None:
-            if not default_id:
-                default_id.append(len(materials))
-                materials.append(default_surface(warn))
-            return default_id[0]
-        key = getattr(mat, "original", mat).as_pointer()
-        if key not in material_index:
-            material_index[key] = len(materials)
-            materials.append(_convert_material(mat, warn, images, baker))
-        return material_index[key]
+    def material_id(mat, hidden: bool = False) -> int:
+        """The index in ``materials`` of ``mat`` (None: the default surface), converted once,
+        or with ``hidden`` of its variant for objects hidden from the camera
+        (``hidden_from_camera``); each is listed when an object first uses it."""
+        key = None if mat is None else getattr(mat, "original", mat).as_pointer()
+        if key not in converted:
+            converted[key] = default_surface(warn) if mat is None else \
+                _convert_material(mat, warn, images, baker)
+        if (key, hidden) not in material_index:
+            material_index[key, hidden] = len(materials)
+            materials.append(hidden_from_camera(converted[key]) if hidden else converted[key])
+        return material_index[key, hidden]
 
     object_names: list[str] = []
     object_index: dict[str, int] = {}
@@ -1516,8 +1551,9 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
         group = groups.get(group_key)
         if group is None:
             slots = obj.material_slots
-            lut = np.array([material_id(s.material) for s in slots] if len(slots)
-                           else [material_id(None)], dtype=np.int32)
+            hidden = not getattr(obj, "visible_camera", True)   # Visibility > Camera off
+            lut = np.array([material_id(s.material, hidden) for s in slots] if len(slots)
+                           else [material_id(None, hidden)], dtype=np.int32)
             group = groups[group_key] = _Group(mesh_cache[key], lut)
         group.matrices.append(matrix)
         group.names.append(name)
@@ -1529,7 +1565,8 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
         colour and geometry attributes its materials read."""
         if data is None:
             return
-        slots = [material_id(s.material) for s in obj.material_slots]
+        hidden = not getattr(obj, "visible_camera", True)
+        slots = [material_id(s.material, hidden) for s in obj.material_slots]
         keys: set = set()
         for i in slots:
             if i not in material_keys:
