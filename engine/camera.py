@@ -1,5 +1,6 @@
-"""Primary rays: Blender's perspective and orthographic cameras, with their thin lens (depth
-of field) as Cycles models it, Blender's framing and a Blackman-Harris pixel filter.
+"""Primary rays: Blender's perspective, orthographic and equirectangular cameras, with the
+thin lens (depth of field) as Cycles models it, Blender's framing and a Blackman-Harris pixel
+filter.
 
 What it computes
     For pixels of the render window and ``samples`` samples per pixel, ray origins on the
@@ -68,7 +69,7 @@ def pixel_rays(camera, pixel_start: int, pixel_stop: int, samples: int, rng: np.
     ly = off[..., 1] * scale_y
     ly += cy[:, None]
     lx, ly = lx.reshape(-1), ly.reshape(-1)
-    if camera.orthographic or (camera.aperture_radius > 0 and not centres):
+    if camera.orthographic or camera.panorama or (camera.aperture_radius > 0 and not centres):
         lens = None
         if camera.aperture_radius > 0 and not centres:
             # Lens positions stratified per pixel, in a random order (so that they are not
@@ -125,16 +126,23 @@ def aperture_points(u: np.ndarray, camera) -> np.ndarray:
 
 
 def _lens_rays(camera, lx, ly, lens):
-    """``pixel_rays`` for an orthographic camera or a thin lens (``lens``: (N, 2) points on
-    it [m], or None for the pinhole), as Cycles' ``camera_sample_perspective`` and
-    ``camera_sample_orthographic``: a ray through the lens point aims at the point of the
+    """``pixel_rays`` for an equirectangular or orthographic camera or a thin lens (``lens``:
+    (N, 2) points on it [m], or None for the pinhole), as Cycles' ``camera_sample_panorama``,
+    ``camera_sample_perspective`` and ``camera_sample_orthographic``: a ray through the lens point aims at the point of the
     focus plane its pixel sample sees through the lens's centre, and starts where it crosses
     the near clip (perspective: at clip start / cos of the pinhole ray's angle along it)."""
     count = len(lx)
     lx, ly = lx.astype(np.float64), ly.astype(np.float64)
     start = float(camera.clip_start)
     local_o = np.zeros((count, 3))
-    if camera.orthographic:
+    if camera.panorama:
+        # The frame [0, 1]^2 of Cycles' equirectangular camera (``Camera.panorama``).
+        u = (lx - (camera.shift_x - camera.tan_half_x)) / (2.0 * camera.tan_half_x)
+        v = (ly - (camera.shift_y - camera.tan_half_y)) / (2.0 * camera.tan_half_y)
+        d = camera.panorama_directions(u, v)
+        local_o = d * start
+        reach = np.full(count, camera.clip_end - start)
+    elif camera.orthographic:
         local_o[:, 0], local_o[:, 1] = lx, ly
         d = np.zeros((count, 3))
         d[:, 2] = -1.0

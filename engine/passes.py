@@ -271,7 +271,13 @@ def project_to_window(camera, points: np.ndarray):
     depth = -local[:, 2]
     ok = depth > camera.clip_start
     safe = np.where(ok, depth, 1.0)
-    if camera.orthographic:
+    if camera.panorama:
+        depth = np.linalg.norm(local, axis=1)
+        ok = depth > camera.clip_start
+        u, v = camera.panorama_coordinates(local)
+        lx = u * 2 * camera.tan_half_x + (camera.shift_x - camera.tan_half_x)
+        ly = v * 2 * camera.tan_half_y + (camera.shift_y - camera.tan_half_y)
+    elif camera.orthographic:
         lx, ly = local[:, 0], local[:, 1]
     else:
         lx, ly = local[:, 0] / safe, local[:, 1] / safe

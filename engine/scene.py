@@ -368,6 +368,12 @@ class Camera:
     in pixels, y from the bottom like Blender, x1/y1 exclusive, selects the rendered window
     (the whole frame when None).
 
+    ``panorama`` "EQUIRECTANGULAR" (default "": none): Cycles' equirectangular camera, the
+    frame spanning longitudes ``longitude_min``..``longitude_max`` from left to right and
+    latitudes ``latitude_min``..``latitude_max`` from bottom to top [rad] about the camera's
+    view axis (-Z, longitude 0) and up axis (+Y, latitude pi/2); its frame extents are then
+    0.5 on each side (the frame is [0, 1]^2 around its centre).
+
     Depth of field (off when ``aperture_radius`` is 0): rays leave a lens of radius
     ``aperture_radius`` [m] in the camera's plane and meet on the plane ``focus_distance`` [m]
     in front of it; ``aperture_blades`` >= 3 makes the lens a regular polygon turned by
@@ -391,6 +397,11 @@ class Camera:
     aperture_blades: int = 0
     aperture_rotation: float = 0.0
     aperture_ratio: float = 1.0
+    panorama: str = ""
+    longitude_min: float = -math.pi
+    longitude_max: float = math.pi
+    latitude_min: float = -0.5 * math.pi
+    latitude_max: float = 0.5 * math.pi
 
     def __post_init__(self):
         self.matrix = np.asarray(self.matrix, dtype=np.float64).reshape(4, 4)
@@ -410,6 +421,15 @@ class Camera:
             if not math.isfinite(self.aperture_rotation):
                 raise SceneError(f"{self.name}: aperture rotation is not finite")
         self.aperture_blades = int(self.aperture_blades)
+        if self.panorama not in ("", "EQUIRECTANGULAR"):
+            raise SceneError(f"{self.name}: panoramic projection {self.panorama!r} is not "
+                             f"supported (only EQUIRECTANGULAR)")
+        if self.panorama and (self.orthographic or self.aperture_radius > 0):
+            raise SceneError(f"{self.name}: a panoramic camera is neither orthographic nor "
+                             f"has depth of field here")
+        if not all(math.isfinite(v) for v in (self.longitude_min, self.longitude_max,
+                                              self.latitude_min, self.latitude_max)):
+            raise SceneError(f"{self.name}: panoramic latitude/longitude range is not finite")
         w, h = (int(v) for v in self.resolution)
         if w < 1 or h < 1:
             raise SceneError(f"{self.name}: resolution {w}x{h} must be at least 1x1")
@@ -437,8 +457,35 @@ class Camera:
 
     @property
     def pixel_angle(self) -> float:
-        """A pixel's width at unit distance (perspective); 0 for an orthographic camera."""
+        """A pixel's width at unit distance (perspective; panoramic: its longitude span, the
+        width at the equator); 0 for an orthographic camera."""
+        if self.panorama:
+            return abs(self.longitude_max - self.longitude_min) / self.resolution[0]
         return 0.0 if self.orthographic else 2.0 * self.tan_half_x / self.resolution[0]
+
+    def panorama_directions(self, u, v) -> np.ndarray:
+        """(N, 3) unit directions in the camera's frame (x right, y up, looking along -z) of
+        an equirectangular camera at frame coordinates u, v in [0, 1] (v from the bottom),
+        as Cycles' ``equirectangular_range_to_direction`` in its panoramic camera frame."""
+        phi = (self.longitude_min - self.longitude_max) * np.asarray(u, np.float64) \
+            - self.longitude_min
+        theta = (self.latitude_min - self.latitude_max) * np.asarray(v, np.float64) \
+            - self.latitude_min + 0.5 * math.pi
+        sin_t = np.sin(theta)
+        # Cycles' frame (x forward, y left, z up) in Blender's camera frame.
+        return np.stack([-sin_t * np.sin(phi), np.cos(theta), -sin_t * np.cos(phi)], axis=-1)
+
+    def panorama_coordinates(self, local) -> tuple[np.ndarray, np.ndarray]:
+        """The inverse of ``panorama_directions``: frame coordinates (u, v) of camera-frame
+        points or directions (N, 3)."""
+        local = np.asarray(local, np.float64).reshape(-1, 3)
+        x, y, z = -local[:, 2], -local[:, 0], local[:, 1]       # Cycles' frame
+        r = np.maximum(np.linalg.norm(local, axis=1), 1e-300)
+        phi = np.arctan2(y, x)
+        theta = np.arccos(np.clip(z / r, -1.0, 1.0))
+        u = (phi + self.longitude_min) / (self.longitude_min - self.longitude_max)
+        v = (theta + self.latitude_min - 0.5 * math.pi) / (self.latitude_min - self.latitude_max)
+        return u, v
 
     @property
     def pixel_width(self) -> float:
@@ -461,7 +508,7 @@ class Camera:
         world point: from the eye (perspective) or from the camera's plane along its axis
         (orthographic)."""
         p = np.asarray(points, np.float64).reshape(-1, 3)
-        if not self.orthographic:
+        if not self.orthographic:         # perspective and panoramic: from the eye
             eye = self.matrix[:3, 3]
             d = p - eye
             dist = np.linalg.norm(d, axis=1)

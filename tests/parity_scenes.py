@@ -40,8 +40,9 @@ Global illumination (``GI_SCENES``, for the all-bounce references of ``make_cycl
   University data page, in millimetres, its light quad an Emission mesh (strength 50) 0.1 mm
   under the ceiling and in view, 64 x 64 (``CORNELL_MM_*`` below).
 
-Cameras (in ``SCENES``): ``sun_ortho`` is ``sun`` through an orthographic camera and
-``sun_dof`` is ``sun`` with depth of field (a focus object, six blades). ``CAMERA_SCENES``
+Cameras (in ``SCENES``): ``sun_ortho`` is ``sun`` through an orthographic camera,
+``sun_dof`` is ``sun`` with depth of field (a focus object, six blades) and ``sun_pano``
+through an equirectangular camera. ``CAMERA_SCENES``
 holds ``bokeh``, two out-of-focus emitters in frame whose images are the lens's shape,
 compared through ``bokeh_moments`` rather than block means, and ``lights_in_frame``, lights
 the camera sees (one of them with Visibility > Camera off), compared by the block rule.
@@ -303,6 +304,21 @@ def sun_ortho():
     return scene
 
 
+def sun_pano():
+    """``sun`` seen through an equirectangular (panoramic) camera at (3, -2.5, 1.2) looking
+    at (-1, 1.5, 0.6), over longitudes -120..150 degrees and latitudes -80..70 degrees (an
+    off-centre camera and ranges, so that a swapped or mirrored axis shows)."""
+    scene = sun()
+    _look_at(scene.camera, (3.0, -2.5, 1.2), (-1.0, 1.5, 0.6))
+    cam = scene.camera.data
+    cam.type = "PANO"
+    settings = cam if hasattr(cam, "panorama_type") else cam.cycles    # Blender 4+ / before
+    settings.panorama_type = "EQUIRECTANGULAR"
+    settings.longitude_min, settings.longitude_max = math.radians(-120.0), math.radians(150.0)
+    settings.latitude_min, settings.latitude_max = math.radians(-80.0), math.radians(70.0)
+    return scene
+
+
 def _focus_on(scene, location):
     """An empty at ``location`` as the camera's Focus Object; depth of field on."""
     target = bpy.data.objects.new("Focus", None)
@@ -408,6 +424,7 @@ SCENES = {
     "world": world,
     "sun_ortho": sun_ortho,
     "sun_dof": sun_dof,
+    "sun_pano": sun_pano,
 }
 # Scenes for the camera's lens alone (their emitters are in frame on purpose).
 CAMERA_SCENES = {"bokeh": bokeh, "lights_in_frame": lights_in_frame}

@@ -182,3 +182,25 @@ def test_orthographic_render_of_a_sunlit_plane_is_its_closed_form():
                                          seed=1)).image
     expected = rho / math.pi * e * math.cos(theta)
     np.testing.assert_allclose(image, expected, rtol=1e-4)
+
+
+def test_equirectangular_rays_cover_the_sphere_and_project_back():
+    cam = replace(Camera.look_at([0.5, -4.0, 2.0], [0.0, 0.0, 0.5], resolution=(32, 16)),
+                  panorama="EQUIRECTANGULAR", tan_half_x=0.5, tan_half_y=0.5)
+    o, d, tmax = pixel_rays(cam, 0, 32 * 16, 1, np.random.default_rng(1), centres=True)
+    local_d = cam.to_camera_space(d + cam.matrix[:3, 3])
+    grid = local_d.reshape(16, 32, 3)               # row 0 = top
+    # The centre of the frame looks along the view axis, the top row up, the bottom row
+    # down, the right half to the camera's right (Cycles' equirectangular frame).
+    np.testing.assert_allclose(grid[7:9, 15:17].mean(axis=(0, 1)), [0, 0, -1], atol=0.05)
+    assert grid[0, :, 1].min() > 0.99 and grid[-1, :, 1].max() < -0.99
+    assert grid[8, 20:28, 0].min() > 0.3 and grid[8, 4:12, 0].max() < -0.3
+    # Pixel solid angles sum to the sphere's 4 pi (cos(latitude) weights).
+    lat = np.arcsin(np.clip(grid[..., 1], -1, 1))
+    assert (np.cos(lat).sum() * (2 * np.pi / 32) * (np.pi / 16)) == pytest.approx(4 * np.pi,
+                                                                                rel=0.01)
+    np.testing.assert_allclose(np.linalg.norm(o - cam.matrix[:3, 3], axis=1), cam.clip_start,
+                               atol=1e-6)           # float32 origins 4 m out
+    pixel, dist = project_to_window(cam, o.astype(np.float64) + 5.0 * d)
+    np.testing.assert_array_equal(pixel, np.arange(32 * 16))
+    np.testing.assert_allclose(dist, 5.0 + cam.clip_start, rtol=1e-5)

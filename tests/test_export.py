@@ -947,6 +947,27 @@ def test_depth_of_field_is_read_as_cycles_reads_it():
     assert sum("Camera 'Camera'" in w and "depth of field is off" in w for w in s.warnings) == 1
 
 
+def test_panoramic_cameras_equirectangular_read_others_reported():
+    scene = reset()
+    cam = add_camera(scene)
+    cam.data.type = "PANO"
+    settings = cam.data if hasattr(cam.data, "panorama_type") else cam.data.cycles
+    settings.panorama_type = "EQUIRECTANGULAR"
+    settings.longitude_min, settings.latitude_max = -2.0, 1.2
+    s = export()
+    c = s.camera
+    assert c.panorama == "EQUIRECTANGULAR" and not s.warnings
+    assert (c.longitude_min, c.latitude_max) == pytest.approx((-2.0, 1.2))
+    assert (c.longitude_max, c.latitude_min) == pytest.approx((math.pi, -math.pi / 2))
+    cam.data.shift_x = 0.1
+    assert any("shift of a panoramic camera" in w for w in export().warnings)
+    settings.panorama_type = "MIRRORBALL"
+    s = export()
+    assert not s.camera.panorama
+    assert any("Camera 'Camera'" in w and "MIRRORBALL" in w and "perspective" in w
+               for w in s.warnings)
+
+
 def test_border_and_resolution_override():
     scene = reset()
     add_camera(scene)

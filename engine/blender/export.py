@@ -98,8 +98,10 @@ animation already applied by Blender) and turns it into the renderer's inert sce
   is black. A new World in Blender 5 is grey 0.05 and Cycles adds it, so it is kept. A world
   that reads Light Path Is Camera Ray (to be seen in one colour and light in another) is read
   for camera rays and for all others: ``World.camera`` is what camera rays see.
-* **Camera**: the scene's active camera, perspective or orthographic (panoramic and custom
-  cameras are reported and treated as perspective with the same lens and sensor). Blender's
+* **Camera**: the scene's active camera, perspective, orthographic or equirectangular
+  (Cycles' panoramic projection with its latitude and longitude ranges; its shift and depth
+  of field are reported and left out; the other panoramic projections and custom cameras are
+  reported and treated as perspective with the same lens and sensor). Blender's
   sensor fit: AUTO fits Sensor Width to the larger side of the frame (in pixels x pixel
   aspect), HORIZONTAL fits Sensor Width to the width, VERTICAL fits Sensor Height to the
   height. tan_half = sensor / (2 lens) on the fitted side (orthographic: a half extent of
@@ -1407,9 +1409,12 @@ def _export_camera(depsgraph, scene, resolution, border, warn: _Warnings) -> Cam
         border = render_border(render, (w, h))
 
     orthographic = data.type == "ORTHO"
-    if data.type not in ("PERSP", "ORTHO"):
-        warn(f"Camera '{name}': {data.type.lower()} cameras are not supported; rendered as "
-             f"perspective with the same lens and sensor")
+    panorama = _panorama(data, name, warn) if data.type == "PANO" else None
+    if data.type not in ("PERSP", "ORTHO") and panorama is None:
+        kind = f"{data.type.lower()} cameras are" if data.type != "PANO" else \
+            f"panoramic cameras of type {_panorama_setting(data, 'panorama_type')} are"
+        warn(f"Camera '{name}': {kind} not supported; rendered as perspective with the same "
+             f"lens and sensor")
     lens = float(data.lens)
     if not (lens > 0 and math.isfinite(lens)):
         raise SceneError(f"Camera '{name}': focal length {lens} mm must be positive")
@@ -1417,6 +1422,16 @@ def _export_camera(depsgraph, scene, resolution, border, warn: _Warnings) -> Cam
     if orthographic and not (ortho_scale > 0 and math.isfinite(ortho_scale)):
         raise SceneError(f"Camera '{name}': orthographic scale {ortho_scale} m must be positive")
     lens_params = _camera_lens(depsgraph, cam_obj, data, matrix, orthographic, lens, warn)
+    if panorama is not None:
+        if lens_params:
+            warn(f"Camera '{name}': depth of field of a panoramic camera is not supported; "
+                 f"rendered sharp")
+        if data.shift_x or data.shift_y:
+            warn(f"Camera '{name}': shift of a panoramic camera is not supported; ignored")
+        return Camera(matrix=matrix, tan_half_x=0.5, tan_half_y=0.5, resolution=(w, h),
+                      clip_start=float(data.clip_start), clip_end=float(data.clip_end),
+                      border=None if border is None else tuple(int(v) for v in border),
+                      name=name, panorama="EQUIRECTANGULAR", **panorama)
 
     # Sensor fit (BKE_camera_params_compute_viewplane): frame size in pixels x pixel aspect.
     fx = w * float(render.pixel_aspect_x)
@@ -1440,6 +1455,32 @@ def _export_camera(depsgraph, scene, resolution, border, warn: _Warnings) -> Cam
                   clip_start=float(data.clip_start), clip_end=float(data.clip_end),
                   border=None if border is None else tuple(int(v) for v in border), name=name,
                   orthographic=orthographic, **lens_params)
+
+
+def _panorama_setting(data, key: str):
+    """A panoramic camera's setting: on the Camera (Blender 4+) or, before, in Cycles' own
+    camera properties."""
+    if hasattr(data, key):
+        return getattr(data, key)
+    return getattr(getattr(data, "cycles", None), key, None)
+
+
+def _panorama(data, name: str, warn) -> dict | None:
+    """The ``scene.Camera`` fields of an equirectangular camera (its latitude and longitude
+    ranges), or None for the other panoramic projections (reported by the caller)."""
+    if _panorama_setting(data, "panorama_type") != "EQUIRECTANGULAR":
+        return None
+    ranges = {key: _panorama_setting(data, key) for key in
+              ("longitude_min", "longitude_max", "latitude_min", "latitude_max")}
+    defaults = {"longitude_min": -math.pi, "longitude_max": math.pi,
+                "latitude_min": -0.5 * math.pi, "latitude_max": 0.5 * math.pi}
+    out = {}
+    for key, value in ranges.items():
+        value = defaults[key] if value is None else float(value)
+        if not math.isfinite(value):
+            raise SceneError(f"Camera '{name}': {key.replace('_', ' ')} is not finite")
+        out[key] = value
+    return out
 
 
 def _camera_lens(depsgraph, cam_obj, data, matrix, orthographic, lens, warn) -> dict:
