@@ -262,11 +262,12 @@ def test_panel_conventions(registered):
         assert cls.bl_space_type == 'PROPERTIES' and cls.bl_region_type == 'WINDOW'
         parent = getattr(cls, "bl_parent_id", "")
         if parent:
-            assert parent in names, cls.__name__
+            # A Lanterna panel registered before it, or a built-in panel opened to Lanterna.
+            assert parent in names or parent in panels._EXTRA_BUILTINS, cls.__name__
             parent_cls = getattr(bpy.types, parent)
             assert parent_cls.bl_context == cls.bl_context, cls.__name__
-            # Registered after its parent.
-            assert panels.classes.index(parent_cls) < panels.classes.index(cls)
+            if parent in names:
+                assert panels.classes.index(parent_cls) < panels.classes.index(cls)
     # The switches live in the headers.
     for cls, prop in ((panels.LANTERNA_RENDER_PT_shadow_photons, "shadow_photons"),
                       (panels.LANTERNA_RENDER_PT_irradiance_cache, "use_irradiance_cache")):
@@ -281,6 +282,7 @@ def test_panel_conventions(registered):
 # -- Poll -------------------------------------------------------------------------------------
 def test_every_panel_polls_only_for_lanterna(registered):
     scene, obj, mat, light, world, cam = build_scene()
+    cam.type = 'PANO'              # the Panorama panel shows for panoramic cameras only
     data = dict(material=mat, light=light, world=world, object=obj, camera=cam)
     for cls in panels.classes:
         assert cls.poll(context_for(scene, **data)), cls.__name__
@@ -289,8 +291,10 @@ def test_every_panel_polls_only_for_lanterna(registered):
     # Data panels need their data block.
     for cls in (panels.LANTERNA_MATERIAL_PT_surface, panels.LANTERNA_MATERIAL_PT_radiometry,
                 panels.LANTERNA_LIGHT_PT_light, panels.LANTERNA_LIGHT_PT_photons,
-                panels.LANTERNA_WORLD_PT_surface):
+                panels.LANTERNA_WORLD_PT_surface, panels.LANTERNA_CAMERA_PT_panorama):
         assert not cls.poll(context_for(scene)), cls.__name__
+    cam.type = 'PERSP'
+    assert not panels.LANTERNA_CAMERA_PT_panorama.poll(context_for(scene, **data))
 
     # bpy.context itself (background mode has engine and scene, no material or light).
     render_panels = [cls for cls in panels.classes if cls.bl_context == "render"]
@@ -310,6 +314,8 @@ def test_every_panel_draws(registered, tmp_path):
     """All panels and headers draw on a scene with a mesh, a material, lights of every type
     and a real last render; every prop they draw exists on its property group."""
     scene, obj, mat, light, world, cam = build_scene()
+    cam.type = 'PANO'
+    cam.panorama_type = 'EQUIRECTANGULAR'
     bpy.ops.render.render()
     last = render_engine.LAST_RENDER
     assert last.get("error") is None and last["report"]["plan"]["stages"]

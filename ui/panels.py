@@ -39,6 +39,10 @@ Light (``light.lanterna``)
     ``LANTERNA_LIGHT_PT_light``    type, colour, power, size or radius, spot cone
       ``LANTERNA_LIGHT_PT_photons``  photon share; shadow photons on/off (area lights only:
                                      points, spots and suns need one shadow ray each)
+Camera
+    ``LANTERNA_CAMERA_PT_panorama``  under Blender's Lens panel, for a panoramic camera: its
+                                     projection and, for equirectangular, the latitude and
+                                     longitude ranges (Blender draws them for Cycles only)
 World
     ``LANTERNA_WORLD_PT_surface``  the world's Surface input (a constant colour is a uniform
                                    environment light)
@@ -48,8 +52,9 @@ management, camera and lens, material slots, object visibility, ...) are opened 
 the way add-on engines do: ``'LANTERNA'`` is added to the ``COMPAT_ENGINES`` set of every
 built-in panel that lists ``'BLENDER_RENDER'``, plus ``_EXTRA_BUILTINS``, except
 ``_EXCLUDED_BUILTINS`` (Blender's light panel and its spot sub-panel, which
-``LANTERNA_LIGHT_PT_light`` replaces, and the previews Lanterna does not render). Depth of
-field is not opened: Lanterna renders a pinhole camera. ``unregister`` removes ``'LANTERNA'``
+``LANTERNA_LIGHT_PT_light`` replaces, and the previews Lanterna does not render), with the
+Depth of Field panels (Lanterna renders the thin lens as Cycles does). ``unregister`` removes
+``'LANTERNA'``
 from every set again, including sets an earlier registration left behind.
 """
 from __future__ import annotations
@@ -681,6 +686,37 @@ class LANTERNA_LIGHT_PT_photons(LanternaPanel, bpy.types.Panel):
 
 
 # -- World ------------------------------------------------------------------------------------
+class LANTERNA_CAMERA_PT_panorama(LanternaPanel, bpy.types.Panel):
+    """Blender's Lens panel draws a panoramic camera's projection for Cycles only: the same
+    settings (on the Camera from Blender 4, in Cycles' camera settings before), and what
+    Lanterna renders of them."""
+    bl_label = "Panorama"
+    bl_context = "data"
+    bl_parent_id = "DATA_PT_lens"
+
+    @classmethod
+    def poll(cls, context):
+        camera = getattr(context, "camera", None)
+        return super().poll(context) and camera is not None and camera.type == 'PANO'
+
+    def draw(self, context):
+        layout = _split(self.layout)
+        camera = context.camera
+        settings = camera if hasattr(camera, "panorama_type") else camera.cycles
+        layout.prop(settings, "panorama_type")
+        if settings.panorama_type == 'EQUIRECTANGULAR':
+            sub = layout.column(align=True)
+            sub.prop(settings, "latitude_min", text="Latitude Min")
+            sub.prop(settings, "latitude_max", text="Max")
+            sub = layout.column(align=True)
+            sub.prop(settings, "longitude_min", text="Longitude Min")
+            sub.prop(settings, "longitude_max", text="Max")
+        else:
+            _wrap(layout, "Lanterna renders only the equirectangular projection; this one is "
+                  "rendered as a perspective camera (the render reports it).", context,
+                  icon='INFO')
+
+
 class LANTERNA_WORLD_PT_surface(_SurfacePanel, bpy.types.Panel):
     bl_context = "world"
 
@@ -732,6 +768,7 @@ classes = (
     LANTERNA_MATERIAL_PT_radiometry,
     LANTERNA_LIGHT_PT_light,
     LANTERNA_LIGHT_PT_photons,
+    LANTERNA_CAMERA_PT_panorama,
     LANTERNA_WORLD_PT_surface,
     LANTERNA_VIEW_LAYER_PT_passes,
 )
