@@ -196,12 +196,13 @@ def test_panels_poll_only_for_lanterna(registered):
     light = bpy.data.lights.new("L", 'POINT')
     world = bpy.data.worlds.new("W")
     cam = bpy.data.cameras.new("C")
+    cam.type = 'PANO'                      # the Panorama panel's data
     for panel in panels.classes:
         assert panel.COMPAT_ENGINES == {ENGINE}
         for engine, expected in ((ENGINE, True), ("CYCLES", False), ("BLENDER_EEVEE", False),
                                  ("BLENDER_WORKBENCH", False)):
             ctx = types.SimpleNamespace(engine=engine, scene=scene, material=mat, light=light,
-                                        world=world, object=None)
+                                        world=world, object=None, camera=cam)
             assert bool(panel.poll(ctx)) is expected, (panel.__name__, engine)
     # Context panels also need their data.
     none = types.SimpleNamespace(engine=ENGINE, scene=scene, material=None, light=None,
