@@ -968,6 +968,25 @@ def test_panoramic_cameras_equirectangular_read_others_reported():
                for w in s.warnings)
 
 
+def test_visibility_flags_lanterna_does_not_follow_are_named():
+    scene = reset()
+    add_camera(scene)
+    cube = add_cube(scene)
+    light, light_obj = add_light(scene, "Lamp", "POINT")
+    light.energy = 10.0
+    assert not any("Visibility" in w or "not supported" in w for w in export().warnings)
+    cube.visible_shadow = cube.visible_glossy = False
+    cube.is_holdout = True
+    light_obj.visible_diffuse = False
+    light.use_shadow = False
+    warnings = export().warnings
+    assert "Object 'Cube': Ray Visibility Glossy, Shadow off is not supported; rendered as " \
+        "if on" in warnings
+    assert any("Object 'Cube': Holdout is not supported" in w for w in warnings)
+    assert any("Object 'Lamp': Ray Visibility Diffuse off" in w for w in warnings)
+    assert any("Light 'Lamp': Cast Shadow off is not supported" in w for w in warnings)
+
+
 def test_border_and_resolution_override():
     scene = reset()
     add_camera(scene)

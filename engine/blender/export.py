@@ -1457,6 +1457,33 @@ def _export_camera(depsgraph, scene, resolution, border, warn: _Warnings) -> Cam
                   orthographic=orthographic, **lens_params)
 
 
+# Object > Visibility flags Lanterna does not follow: (property, label).
+_RAY_FLAGS = (("visible_diffuse", "Diffuse"), ("visible_glossy", "Glossy"),
+              ("visible_transmission", "Transmission"))
+_SHADOW_FLAG = ("visible_shadow", "Shadow")
+
+
+def _report_visibility(obj, warn) -> None:
+    """Warn, naming the object, of the visibility settings that Cycles follows and Lanterna
+    does not (it renders the object as if they were at their defaults): Ray Visibility
+    Diffuse, Glossy, Transmission (and Shadow for geometry) off, Shadow Catcher, Holdout, and a
+    light's Cast Shadow off. Camera visibility is followed (``hidden_from_camera``, lights'
+    ``camera_visible``)."""
+    name = obj.name
+    flags = _RAY_FLAGS if obj.type == "LIGHT" else _RAY_FLAGS + (_SHADOW_FLAG,)
+    off = [label for attr, label in flags if not getattr(obj, attr, True)]
+    if off:
+        warn(f"Object '{name}': Ray Visibility {', '.join(off)} off is not supported; "
+             f"rendered as if on")
+    if obj.type == "LIGHT":       # (a light's own is_shadow_catcher reads True: not used)
+        if not getattr(obj.data, "use_shadow", True):
+            warn(f"Light '{name}': Cast Shadow off is not supported; it casts shadows")
+        return
+    for attr, label in (("is_shadow_catcher", "Shadow Catcher"), ("is_holdout", "Holdout")):
+        if getattr(obj, attr, False):
+            warn(f"Object '{name}': {label} is not supported; rendered as an ordinary object")
+
+
 def _panorama_setting(data, key: str):
     """A panoramic camera's setting: on the Camera (Blender 4+) or, before, in Cycles' own
     camera properties."""
@@ -1646,6 +1673,7 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
                                          size_x=float(data.size), size_y=size_y,
                                          power=np.zeros(3)))
         elif otype == "LIGHT":
+            _report_visibility(obj, warn)
             light = _convert_light(name, obj.data, matrix, warn)
             if light is not None:
                 settings = getattr(obj.data, "lanterna", None)
@@ -1657,6 +1685,7 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
                     light.camera_visible = bool(getattr(obj, "visible_camera", False))
                 lights.append(light)
         elif otype == "MESH":
+            _report_visibility(obj, warn)
             if parent is not None:
                 mesh_parents.add(parent.original.as_pointer())
             key = ("mesh", obj.data.as_pointer())
