@@ -78,7 +78,7 @@ def pixel_rays(camera, pixel_start: int, pixel_stop: int, samples: int, rng: np.
                                    camera)
         return _lens_rays(camera, lx, ly, lens)
     m = camera.matrix
-    rotation = (m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0)).astype(np.float32)  # no scale
+    rotation = camera.rotation.astype(np.float32)
     position = m[:3, 3].astype(np.float32)
     clip_start = np.float32(camera.clip_start)
     count = len(lx)
@@ -128,9 +128,10 @@ def aperture_points(u: np.ndarray, camera) -> np.ndarray:
 def _lens_rays(camera, lx, ly, lens):
     """``pixel_rays`` for an equirectangular or orthographic camera or a thin lens (``lens``:
     (N, 2) points on it [m], or None for the pinhole), as Cycles' ``camera_sample_panorama``,
-    ``camera_sample_perspective`` and ``camera_sample_orthographic``: a ray through the lens point aims at the point of the
-    focus plane its pixel sample sees through the lens's centre, and starts where it crosses
-    the near clip (perspective: at clip start / cos of the pinhole ray's angle along it)."""
+    ``camera_sample_perspective`` and ``camera_sample_orthographic``: a ray through the lens
+    point aims at the point of the focus plane its pixel sample sees through the lens's
+    centre, and starts where it crosses the near clip (perspective: at clip start / cos of the
+    pinhole ray's angle along it)."""
     count = len(lx)
     lx, ly = lx.astype(np.float64), ly.astype(np.float64)
     start = float(camera.clip_start)
@@ -164,9 +165,8 @@ def _lens_rays(camera, lx, ly, lens):
         d /= np.linalg.norm(d, axis=1)[:, None]
         local_o += d * (start * stretch)[:, None]
         reach = (camera.clip_end - start) * stretch
-    m = camera.matrix
-    rotation = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0)
-    origins = (local_o @ rotation.T + m[:3, 3]).astype(np.float32)
+    rotation = camera.rotation
+    origins = (local_o @ rotation.T + camera.matrix[:3, 3]).astype(np.float32)
     directions = (d @ rotation.T).astype(np.float32)
     length = np.sqrt(sampling.dot_rows(directions, directions))
     sampling.scale_rows(directions, np.float32(1.0) / length, out=directions)

@@ -157,18 +157,14 @@ class CachedIndirect:
     (a = 0.4, 19 s of 28 s). Reaching for records with a relaxed error instead was measured 2x
     too bright along a box's contact with the floor.
 
-    ``eye`` [m], ``pixel_angle`` (2 tan(fov_x / 2) / width) and ``pixel_width`` [m] give a
-    point's pixel footprint (``pixel_width`` plus its distance from the eye times
-    ``pixel_angle``: ``scene.Camera.footprint``). ``stats["covered_mask"]`` is left for
+    ``camera`` (``scene.Camera``) gives a point's pixel footprint (``Camera.footprint`` of its
+    distance from the camera's position). ``stats["covered_mask"]`` is left for
     the batch: which asking samples a placed record served (the Cache usage pass)."""
 
-    def __init__(self, cache, a, gather: FinalGather, lookups, use_gradients, eye,
-                 pixel_angle, pixel_width=0.0):
+    def __init__(self, cache, a, gather: FinalGather, lookups, use_gradients, camera):
         self.cache, self.a, self.gather, self.lookups = cache, a, gather, lookups
         self.use_gradients = use_gradients
-        self.eye = np.asarray(eye, np.float64)
-        self.pixel_angle = float(pixel_angle)
-        self.pixel_width = float(pixel_width)
+        self.camera = camera
         self.channels = gather.channels
 
     def surface_irradiance(self, x, n):
@@ -208,8 +204,8 @@ def local_cache_records(indirect: CachedIndirect, x, ns, ng, rest, e, covered, r
         if len(rest) < 2:                     # one sample: its own gather serves no other
             break
         pick = rest[::step]
-        footprint = (indirect.pixel_width
-                     + np.linalg.norm(x[pick] - indirect.eye, axis=1) * indirect.pixel_angle)
+        camera = indirect.camera
+        footprint = camera.footprint(np.linalg.norm(x[pick] - camera.position, axis=1))
         reach = np.maximum(R_MIN_PIXELS * footprint / a, 1e-12)
         e_pick, e_rec, radius, rot, trans, _var = gathered_records(
             indirect.gather, x[pick], ns[pick], ng[pick], rng, reach, reach, stats)

@@ -264,26 +264,23 @@ def shadow_classes_image(hits: CentreHits, shadow_map, light_indices) -> np.ndar
 def project_to_window(camera, points: np.ndarray):
     """Window pixel (row-major, top row first; -1 outside the window or behind the camera)
     and distance [m] from the camera (its eye, or for an orthographic camera its plane) of each
-    world-space point: the inverse of
-    ``camera.pixel_rays``' pixel-centre mapping."""
+    world-space point: the inverse of ``camera.pixel_rays``' pixel-centre mapping."""
     p = np.asarray(points, np.float64).reshape(-1, 3)
     local = camera.to_camera_space(p)             # camera space: looks along -z
-    depth = -local[:, 2]
-    ok = depth > camera.clip_start
-    safe = np.where(ok, depth, 1.0)
-    if camera.panorama:
-        depth = np.linalg.norm(local, axis=1)
-        ok = depth > camera.clip_start
-        u, v = camera.panorama_coordinates(local)
-        lx = u * 2 * camera.tan_half_x + (camera.shift_x - camera.tan_half_x)
-        ly = v * 2 * camera.tan_half_y + (camera.shift_y - camera.tan_half_y)
-    elif camera.orthographic:
-        lx, ly = local[:, 0], local[:, 1]
-    else:
-        lx, ly = local[:, 0] / safe, local[:, 1] / safe
     full_w, full_h = camera.resolution
-    px = np.floor((lx - (camera.shift_x - camera.tan_half_x)) * full_w / (2 * camera.tan_half_x))
-    py = np.floor((ly - (camera.shift_y - camera.tan_half_y)) * full_h / (2 * camera.tan_half_y))
+    if camera.panorama:                           # frame coordinates in [0, 1]
+        ok = np.linalg.norm(local, axis=1) > camera.clip_start
+        u, v = camera.panorama_coordinates(local)
+    else:
+        depth = -local[:, 2]
+        ok = depth > camera.clip_start
+        lx, ly = local[:, 0], local[:, 1]
+        if not camera.orthographic:               # on the plane at unit distance
+            safe = np.where(ok, depth, 1.0)
+            lx, ly = lx / safe, ly / safe
+        u = (lx - (camera.shift_x - camera.tan_half_x)) / (2 * camera.tan_half_x)
+        v = (ly - (camera.shift_y - camera.tan_half_y)) / (2 * camera.tan_half_y)
+    px, py = np.floor(u * full_w), np.floor(v * full_h)
     x0, y0, x1, y1 = camera.border
     ok &= (px >= x0) & (px < x1) & (py >= y0) & (py < y1)
     win_w, win_h = x1 - x0, y1 - y0

@@ -268,11 +268,8 @@ def _cache(prep: Prepared, scene, settings, gather, lookups, tell, cancelled, ar
                       gather=f"{settings.gather_m}x{settings.gather_n}",
                       reused=reused)
     prep.cache = cache
-    cam = scene.camera
     prep.indirect = CachedIndirect(cache, settings.cache_error, gather, lookups,
-                                   settings.cache_gradients,
-                                   eye=cam.position, pixel_angle=cam.pixel_angle,
-                                   pixel_width=cam.pixel_width)
+                                   settings.cache_gradients, scene.camera)
 
 
 def _shadow_photons(prep: Prepared, scene, settings, tell, artifacts):

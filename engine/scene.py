@@ -356,8 +356,8 @@ class World:
 
 @dataclass
 class Camera:
-    """Blender's perspective or orthographic camera with sensor fit and shift resolved, and
-    its thin lens (depth of field) as Cycles models it.
+    """Blender's perspective, orthographic or equirectangular camera with sensor fit and shift
+    resolved, and its thin lens (depth of field) as Cycles models it.
 
     ``matrix`` is the 4x4 camera-to-world matrix (the camera looks along local -Z, +Y is up).
     ``tan_half_x``/``tan_half_y`` are the half extents of the full frame on the plane at unit
@@ -497,11 +497,17 @@ class Camera:
         depth of field's blur is not counted, as Cycles' ray differentials do not count it)."""
         return self.pixel_width + np.asarray(distance, np.float64) * self.pixel_angle
 
+    @property
+    def rotation(self) -> np.ndarray:
+        """(3, 3) the camera frame's axes in world space, as columns (the matrix's scale
+        removed)."""
+        m = self.matrix[:3, :3]
+        return m / np.linalg.norm(m, axis=0)
+
     def to_camera_space(self, points) -> np.ndarray:
         """(N, 3) world points [m] in the camera's frame (x right, y up, looking along -z)."""
-        m = self.matrix
-        rotation = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0)
-        return (np.asarray(points, np.float64).reshape(-1, 3) - m[:3, 3]) @ rotation
+        return (np.asarray(points, np.float64).reshape(-1, 3) - self.matrix[:3, 3]) \
+            @ self.rotation
 
     def rays_to(self, points):
         """(origins, unit directions, distances [m]) of the pinhole's rays that end at each
@@ -514,10 +520,8 @@ class Camera:
             dist = np.linalg.norm(d, axis=1)
             return (np.broadcast_to(eye, p.shape).copy(),
                     d / np.maximum(dist, 1e-30)[:, None], dist)
-        m = self.matrix
-        rotation = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0)
         depth = -self.to_camera_space(p)[:, 2]
-        axis = -rotation[:, 2]
+        axis = -self.rotation[:, 2]
         origins = p - depth[:, None] * axis
         return origins, np.broadcast_to(axis, p.shape).copy(), depth
 
