@@ -91,7 +91,7 @@ from .bsdf import (RoughDiffuseHits, layer_diffuse_factor, lobe_shares, reflecti
                    sample_glossy)
 from .direct import direct_terms, irradiance_from_terms
 from .passes import DIFFUSE, GLOSSY, LIGHT_PASS_NAMES, TRANSMISSION, LightSums
-from .lights import ray_visible, seen_light_radiance
+from .lights import SunCone, ray_visible, seen_light_radiance, seen_sun_radiance
 from .settings import (ADAPTIVE_BUDGET, ADAPTIVE_LEVELS, TARGET_BATCH_SAMPLES,
                        RenderSettings, camera_blocks)
 from .textures import STRAIGHT_ON, ray_after_bounce
@@ -393,6 +393,9 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera, subset=
     # radius: ``lights.ray_visible``); camera rays those with Visibility > Camera on.
     ray_lights = any(ray_visible(light) for light in context.lights.sampled)
     camera_lights = _lights_in_frame(context.lights)
+    # Suns with an angle: their discs, for rays that leave the scene straight from the camera
+    # (Visibility > Camera on) or after a delta bounce (``seen_sun_radiance``).
+    suns = any(isinstance(light, SunCone) for light in context.lights.sampled)
     # Where the world's or a material's nodes tell camera rays apart (``World.camera``,
     # Light Path Is Camera Ray), each ray after the first hit carries whether it is still a
     # camera ray: it went on straight through transparent surfaces only, which keep Cycles'
@@ -477,6 +480,22 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera, subset=
                     light.add_seen(ray_of[~hit], missed, world=True)
                 else:
                     light.add(ray_of[~hit], missed, direct=depth == 1, kind=path_kind[~hit])
+        if suns and not all_hit:
+            gone = np.flatnonzero(~hit)
+            if mis_pdf is not None:              # after a glossy lobe its light samples count
+                gone = gone[np.isinf(mis_pdf[gone])]
+            disc = seen_sun_radiance(context.lights, directions[gone], camera=depth == 0)
+            gone, disc = gone[disc.any(axis=1)], disc[disc.any(axis=1)]
+            if len(gone):
+                value = disc if throughput is None else throughput[gone] * disc
+                if depth == 0 and own_emission is not None:
+                    value = value * own_emission[ray_of[gone]][:, None]
+                add_to_pixels(emission_sums, ray_of[gone] // spp, value)
+                if light is not None:
+                    if depth == 0:
+                        light.add_seen(ray_of[gone], value, world=False)
+                    else:
+                        light.add(ray_of[gone], value, direct=depth == 1, kind=path_kind[gone])
         if not hit.any():
             break
         if not all_hit:
@@ -878,9 +897,10 @@ def world_along(world, directions: np.ndarray, camera) -> np.ndarray | None:
 
 def _lights_in_frame(lights) -> bool:
     """Whether camera rays can see any of ``lights`` (a ``LightSet`` or None): lights that
-    are not geometry, with Visibility > Camera on."""
-    return lights is not None and any(ray_visible(light) and light.camera_visible
-                                      for light in lights.sampled)
+    are not geometry and suns' discs, with Visibility > Camera on."""
+    return lights is not None and any(
+        (ray_visible(light) or isinstance(light, SunCone)) and light.camera_visible
+        for light in lights.sampled)
 
 
 def _seen_emission(scene, accel, surfaces, origins, directions, tmax, split=False,
@@ -902,6 +922,8 @@ def _seen_emission(scene, accel, surfaces, origins, directions, tmax, split=Fals
     if lights is not None:
         out += seen_light_radiance(lights, origins, directions, np.where(hit, _t, np.inf),
                                    camera=True)
+        if not hit.all():
+            out[~hit] += seen_sun_radiance(lights, directions[~hit], camera=True)
     if hit.any():
         p = prim[hit]
         front = sampling.dot_rows(np.take(surfaces.geometric_normals, p, axis=0),

@@ -210,6 +210,9 @@ class SunLight:
 
     ``direction`` is the way the light travels (Blender: the sun's local -Z). ``angle`` [rad] is
     the full angular diameter of the sun's disc (Blender's Angle); 0 gives a hard shadow.
+    A sun with an angle is a disc of radiance irradiance / (pi sin^2(angle / 2)) (Cycles'),
+    which rays leaving the scene meet: camera rays when ``camera_visible`` (Blender's
+    Visibility > Camera, off for a new light) and rays after a mirror or smooth glass.
     """
 
     name: str
@@ -217,9 +220,11 @@ class SunLight:
     irradiance: np.ndarray
     angle: float = 0.0
     photon_share: float = 1.0
+    camera_visible: bool = False
 
     def __post_init__(self):
         self.photon_share = _share(self.photon_share, self.name)
+        self.camera_visible = bool(self.camera_visible)
         self.direction = _unit(self.direction, self.name, "direction")
         self.irradiance = _rgb(self.irradiance, self.name, "irradiance")
         self.angle = float(np.clip(self.angle, 0.0, np.pi))

@@ -88,7 +88,8 @@ animation already applied by Blender) and turns it into the renderer's inert sce
   - ``Light.lanterna``: ``photon_share`` goes onto every light; ``shadow_photons`` onto area
     lights (the only ones shadow photons leave).
   - The object's Visibility > Camera (``visible_camera``, off for a new light) becomes
-    ``camera_visible`` of point, spot and area lights: camera rays see them, as in Cycles.
+    ``camera_visible`` of point, spot, sun and area lights: camera rays see them, as in
+    Cycles.
 * **World**: Background <- Environment Texture (<- Mapping <- Texture Coordinate) or Sky
   Texture: an image environment (``world_export.environment_of``); area lights with
   Cycles' ``is_portal`` become its portals, not lights. Otherwise a uniform environment of
