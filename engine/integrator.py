@@ -485,7 +485,8 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera, subset=
             if mis_pdf is not None:              # after a glossy lobe its light samples count
                 gone = gone[np.isinf(mis_pdf[gone])]
             disc = seen_sun_radiance(context.lights, directions[gone], camera=depth == 0)
-            gone, disc = gone[disc.any(axis=1)], disc[disc.any(axis=1)]
+            inside = disc.any(axis=1)
+            gone, disc = gone[inside], disc[inside]
             if len(gone):
                 value = disc if throughput is None else throughput[gone] * disc
                 if depth == 0 and own_emission is not None:

@@ -312,10 +312,9 @@ def sun_pano():
     _look_at(scene.camera, (3.0, -2.5, 1.2), (-1.0, 1.5, 0.6))
     cam = scene.camera.data
     cam.type = "PANO"
-    settings = cam if hasattr(cam, "panorama_type") else cam.cycles    # Blender 4+ / before
-    settings.panorama_type = "EQUIRECTANGULAR"
-    settings.longitude_min, settings.longitude_max = math.radians(-120.0), math.radians(150.0)
-    settings.latitude_min, settings.latitude_max = math.radians(-80.0), math.radians(70.0)
+    cam.panorama_type = "EQUIRECTANGULAR"
+    cam.longitude_min, cam.longitude_max = math.radians(-120.0), math.radians(150.0)
+    cam.latitude_min, cam.latitude_max = math.radians(-80.0), math.radians(70.0)
     return scene
 
 

@@ -951,7 +951,7 @@ def test_panoramic_cameras_equirectangular_read_others_reported():
     scene = reset()
     cam = add_camera(scene)
     cam.data.type = "PANO"
-    settings = cam.data if hasattr(cam.data, "panorama_type") else cam.data.cycles
+    settings = cam.data
     settings.panorama_type = "EQUIRECTANGULAR"
     settings.longitude_min, settings.latitude_max = -2.0, 1.2
     s = export()

@@ -688,8 +688,7 @@ class LANTERNA_LIGHT_PT_photons(LanternaPanel, bpy.types.Panel):
 # -- World ------------------------------------------------------------------------------------
 class LANTERNA_CAMERA_PT_panorama(LanternaPanel, bpy.types.Panel):
     """Blender's Lens panel draws a panoramic camera's projection for Cycles only: the same
-    settings (on the Camera from Blender 4, in Cycles' camera settings before), and what
-    Lanterna renders of them."""
+    settings, and what Lanterna renders of them."""
     bl_label = "Panorama"
     bl_context = "data"
     bl_parent_id = "DATA_PT_lens"
@@ -702,15 +701,14 @@ class LANTERNA_CAMERA_PT_panorama(LanternaPanel, bpy.types.Panel):
     def draw(self, context):
         layout = _split(self.layout)
         camera = context.camera
-        settings = camera if hasattr(camera, "panorama_type") else camera.cycles
-        layout.prop(settings, "panorama_type")
-        if settings.panorama_type == 'EQUIRECTANGULAR':
+        layout.prop(camera, "panorama_type")
+        if camera.panorama_type == 'EQUIRECTANGULAR':
             sub = layout.column(align=True)
-            sub.prop(settings, "latitude_min", text="Latitude Min")
-            sub.prop(settings, "latitude_max", text="Max")
+            sub.prop(camera, "latitude_min", text="Latitude Min")
+            sub.prop(camera, "latitude_max", text="Max")
             sub = layout.column(align=True)
-            sub.prop(settings, "longitude_min", text="Longitude Min")
-            sub.prop(settings, "longitude_max", text="Max")
+            sub.prop(camera, "longitude_min", text="Longitude Min")
+            sub.prop(camera, "longitude_max", text="Max")
         else:
             _wrap(layout, "Lanterna renders only the equirectangular projection; this one is "
                   "rendered as a perspective camera (the render reports it).", context,

@@ -1105,6 +1105,12 @@ def material_from_nodes(mat, warn=None, images: dict | None = None,
                     shading_normal=shading_normal)
 
 
+def camera_hidden(obj) -> bool:
+    """Whether a geometry object's Visibility > Camera is off (its materials then render as
+    ``hidden_from_camera`` makes them)."""
+    return not getattr(obj, "visible_camera", True)
+
+
 # The Light Path node that a camera-hidden object's materials read (``hidden_from_camera``).
 HIDDEN_NODE = "Lanterna: Visibility > Camera off"
 
@@ -1410,10 +1416,10 @@ def _export_camera(depsgraph, scene, resolution, border, warn: _Warnings) -> Cam
         border = render_border(render, (w, h))
 
     orthographic = data.type == "ORTHO"
-    panorama = _panorama(data, name, warn) if data.type == "PANO" else None
+    panorama = _panorama(data, name) if data.type == "PANO" else None
     if data.type not in ("PERSP", "ORTHO") and panorama is None:
         kind = f"{data.type.lower()} cameras are" if data.type != "PANO" else \
-            f"panoramic cameras of type {_panorama_setting(data, 'panorama_type')} are"
+            f"panoramic cameras of type {data.panorama_type} are"
         warn(f"Camera '{name}': {kind} not supported; rendered as perspective with the same "
              f"lens and sensor")
     lens = float(data.lens)
@@ -1485,29 +1491,17 @@ def _report_visibility(obj, warn) -> None:
             warn(f"Object '{name}': {label} is not supported; rendered as an ordinary object")
 
 
-def _panorama_setting(data, key: str):
-    """A panoramic camera's setting: on the Camera (Blender 4+) or, before, in Cycles' own
-    camera properties."""
-    if hasattr(data, key):
-        return getattr(data, key)
-    return getattr(getattr(data, "cycles", None), key, None)
-
-
-def _panorama(data, name: str, warn) -> dict | None:
+def _panorama(data, name: str) -> dict | None:
     """The ``scene.Camera`` fields of an equirectangular camera (its latitude and longitude
-    ranges), or None for the other panoramic projections (reported by the caller)."""
-    if _panorama_setting(data, "panorama_type") != "EQUIRECTANGULAR":
+    ranges, on the Camera from Blender 4.0 on), or None for the other panoramic projections
+    (reported by the caller)."""
+    if data.panorama_type != "EQUIRECTANGULAR":
         return None
-    ranges = {key: _panorama_setting(data, key) for key in
-              ("longitude_min", "longitude_max", "latitude_min", "latitude_max")}
-    defaults = {"longitude_min": -math.pi, "longitude_max": math.pi,
-                "latitude_min": -0.5 * math.pi, "latitude_max": 0.5 * math.pi}
-    out = {}
-    for key, value in ranges.items():
-        value = defaults[key] if value is None else float(value)
+    out = {key: float(getattr(data, key)) for key in
+           ("longitude_min", "longitude_max", "latitude_min", "latitude_max")}
+    for key, value in out.items():
         if not math.isfinite(value):
             raise SceneError(f"Camera '{name}': {key.replace('_', ' ')} is not finite")
-        out[key] = value
     return out
 
 
@@ -1620,7 +1614,7 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
         group = groups.get(group_key)
         if group is None:
             slots = obj.material_slots
-            hidden = not getattr(obj, "visible_camera", True)   # Visibility > Camera off
+            hidden = camera_hidden(obj)
             lut = np.array([material_id(s.material, hidden) for s in slots] if len(slots)
                            else [material_id(None, hidden)], dtype=np.int32)
             group = groups[group_key] = _Group(mesh_cache[key], lut)
@@ -1634,7 +1628,7 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
         colour and geometry attributes its materials read."""
         if data is None:
             return
-        hidden = not getattr(obj, "visible_camera", True)
+        hidden = camera_hidden(obj)
         slots = [material_id(s.material, hidden) for s in obj.material_slots]
         keys: set = set()
         for i in slots:
