@@ -387,6 +387,57 @@ def lights_in_frame():
     return scene
 
 
+HAIR_COLOUR = (0.7, 0.35, 0.15)
+
+
+def _curves_object(scene, name, strands, material, poly=False):
+    """A Curves object of ``strands`` [(points (n, 3), radii (n,)), ...] with ``material``."""
+    data = bpy.data.hair_curves.new(name)
+    data.add_curves([len(p) for p, _ in strands])
+    points = np.concatenate([p for p, _ in strands]).astype(np.float32)
+    radii = np.concatenate([r for _, r in strands]).astype(np.float32)
+    data.position_data.foreach_set("vector", points.reshape(-1))
+    if "radius" not in data.attributes:
+        data.attributes.new("radius", "FLOAT", "POINT")
+    data.attributes["radius"].data.foreach_set("value", radii)
+    if poly:
+        data.set_types(type="POLY")
+    data.materials.append(material)
+    obj = bpy.data.objects.new(name, data)
+    scene.collection.objects.link(obj)
+    return obj
+
+
+def hair():
+    """Hair curves under ``sun``'s light: a tuft of 12 Catmull-Rom strands of three points
+    each on an arc of 2 radians (radius 0.8 m, turned to random azimuths; the spline departs
+    from the points' straight pieces by about 2 px), radius 0.09, 0.06 and 0 m (a closed
+    tip), left of the box, and 5
+    straight-piece (poly) strands of radius 0.05 m on its right, Principled ``HAIR_COLOUR``,
+    Cycles' default Curves shape (Rounded Ribbons) turned to 3D Curves, the shape Lanterna
+    draws. Strands are about 2-3 px wide at 64 x 48 and cast shadows on the floor and wall."""
+    scene = sun()
+    scene.cycles_curves.shape = "THICK"
+    mat = _material_principled("Hair", HAIR_COLOUR)
+    rng = np.random.default_rng(7)
+    strands = []
+    for i in range(12):
+        root = np.array([-2.1 + 0.35 * (i % 4), -1.2 + 0.45 * (i // 4), -0.05])
+        azimuth = rng.uniform(0.0, 2.0 * math.pi)
+        bend = 2.0 * np.linspace(0.0, 1.0, 3)          # an arc of 2 rad, radius 0.8 m
+        out, up = 0.8 * (1.0 - np.cos(bend)), 0.8 * np.sin(bend)
+        points = root + np.stack([out * math.cos(azimuth), out * math.sin(azimuth), up], axis=1)
+        strands.append((points, np.array([0.09, 0.06, 0.0])))
+    _curves_object(scene, "Tuft", strands, mat)
+    poly = []
+    for i in range(5):
+        root = np.array([0.9 + 0.2 * i, -1.9 + 0.25 * i, 0.0])
+        points = root + np.array([[0, 0, 0], [0.1, 0.0, 0.5], [0.35, -0.1, 0.9], [0.5, 0.0, 1.1]])
+        poly.append((points, np.full(4, 0.05)))
+    _curves_object(scene, "Stubble", poly, mat, poly=True)
+    return scene
+
+
 # Window columns holding each emitter's image in ``bokeh`` (at 64 x 48).
 BOKEH_REGIONS = {"far": (0, 32), "near": (32, 64)}
 BOKEH_BLADES, BOKEH_RATIO = 5, 1.4
@@ -427,6 +478,8 @@ SCENES = {
 }
 # Scenes for the camera's lens alone (their emitters are in frame on purpose).
 CAMERA_SCENES = {"bokeh": bokeh, "lights_in_frame": lights_in_frame}
+# Geometry beyond meshes, compared by the block rule like ``SCENES``.
+GEOMETRY_SCENES = {"hair": hair}
 
 
 # --- global illumination ------------------------------------------------------------------
@@ -576,9 +629,9 @@ GI_SCENES = {
 
 
 def build(name: str):
-    """Build scene ``name`` (of ``SCENES``, ``CAMERA_SCENES`` or ``GI_SCENES``) into a fresh
-    file and return the bpy scene."""
-    scene = {**SCENES, **CAMERA_SCENES, **GI_SCENES}[name]()
+    """Build scene ``name`` (of ``SCENES``, ``CAMERA_SCENES``, ``GEOMETRY_SCENES`` or
+    ``GI_SCENES``) into a fresh file and return the bpy scene."""
+    scene = {**SCENES, **CAMERA_SCENES, **GEOMETRY_SCENES, **GI_SCENES}[name]()
     bpy.context.view_layer.update()
     return scene
 

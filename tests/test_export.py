@@ -214,6 +214,83 @@ def test_nan_location_skips_object_with_warning():
     assert len(msgs) == 1 and "not finite" in msgs[0] and "12 triangles" in msgs[0]
 
 
+def add_curves(scene, name, strands, radius=None, poly=False, materials=()):
+    """A Curves object: ``strands`` a list of (n, 3) point arrays; ``radius`` per point (one
+    value for all), or None for no radius attribute."""
+    data = bpy.data.hair_curves.new(name)
+    data.add_curves([len(p) for p in strands])
+    points = np.concatenate(strands).astype(np.float32)
+    data.position_data.foreach_set("vector", points.reshape(-1))
+    if radius is not None:
+        if "radius" not in data.attributes:
+            data.attributes.new("radius", "FLOAT", "POINT")
+        data.attributes["radius"].data.foreach_set("value", np.full(len(points), radius,
+                                                                   np.float32))
+    elif "radius" in data.attributes:
+        data.attributes.remove(data.attributes["radius"])
+    if poly:                       # (Blender 4.2 has no set_types: callers check)
+        data.set_types(type="POLY")
+    for mat in materials:
+        data.materials.append(mat)
+    obj = bpy.data.objects.new(name, data)
+    scene.collection.objects.link(obj)
+    return obj
+
+
+def test_hair_curves_render_as_tubes_as_cycles_reads_them():
+    """A Curves object becomes tubes (engine/hair.py) around its control points: the radius
+    attribute, or Cycles' 0.005 m without one; every curve with the first material, as
+    Cycles' sync_hair; poly curves as straight pieces; Rounded Ribbons reported."""
+    scene = reset()
+    add_camera(scene)
+    red, blue = new_material("Red"), new_material("Blue")
+    straight = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    bent = np.array([[1.0, 0.0, 0.0], [1.0, 0.0, 1.0], [2.0, 0.0, 1.5]])
+    plain = add_curves(scene, "Plain", [straight], materials=(red, blue))
+    plain.location = (-3.0, 0.0, 0.0)
+    add_curves(scene, "Thick", [bent], radius=0.02)
+    has_poly = hasattr(bpy.types.Curves, "set_types")       # Blender 4.3 on
+    if has_poly:
+        add_curves(scene, "Poly", [bent], radius=0.02, poly=True).location = (0.0, 3.0, 0.0)
+    scene.cycles_curves.shape = "THICK"
+    s = export()
+    assert not [w for w in s.warnings if "curves" in w.lower() or "ribbon" in w.lower()], \
+        s.warnings
+    for name in ("Plain", "Thick", "Poly") if has_poly else ("Plain", "Thick"):
+        assert np.sum(s.object_ids == s.object_names.index(name)) > 0, name
+    plain_tris = s.triangles[s.object_ids == s.object_names.index("Plain")]
+    assert np.all(s.material_ids[s.object_ids == s.object_names.index("Plain")]
+                  == s.materials.index(material_of(s, "Red")))
+    across = np.hypot(plain_tris[..., 0] + 3.0, plain_tris[..., 1])
+    widen = (math.pi / 6) / math.sin(math.pi / 6)
+    assert across.max() == pytest.approx(0.005 * widen, rel=1e-4)
+    # The spline bends between the points, the poly curve does not: three rings, 2 pieces.
+    thick = np.sum(s.object_ids == s.object_names.index("Thick"))
+    assert thick > 2 * 6 * 2 + 2 * 4
+    if has_poly:
+        assert np.sum(s.object_ids == s.object_names.index("Poly")) == 2 * 6 * 2 + 2 * 4
+    # Blender's default shape (Rounded Ribbons) is drawn as 3D curves, and said.
+    scene.cycles_curves.shape = "RIBBONS"
+    s = export()
+    said = [w for w in s.warnings if "Rounded Ribbons" in w]
+    assert len(said) == 2 + has_poly and "'Plain'" in said[0]
+
+
+def test_particle_hair_is_named_not_silently_dropped():
+    scene = reset()
+    add_camera(scene)
+    cube = add_cube(scene, "Furry")
+    modifier = cube.modifiers.new("Fur", "PARTICLE_SYSTEM")
+    modifier.particle_system.settings.type = "HAIR"
+    modifier.particle_system.settings.count = 10
+    s = export()
+    said = [w for w in s.warnings if "particle hair" in w]
+    assert len(said) == 1 and "'Furry'" in said[0] and "Convert > Curves" in said[0]
+    assert np.sum(s.object_ids == s.object_names.index("Furry")) == 12     # the cube itself
+    modifier.show_render = False
+    assert not [w for w in export().warnings if "particle hair" in w]
+
+
 # ---------------------------------------------------------------------------------------------
 # Materials
 # ---------------------------------------------------------------------------------------------

@@ -14,8 +14,10 @@ animation already applied by Blender) and turns it into the renderer's inert sce
   in numpy. The triangles of one mesh datablock are read once however often it is instanced,
   and all instances of one mesh are transformed together (one batch of numpy per mesh). Render
   visibility follows Blender: Disable in Renders, Show Instancer for Render, and the original
-  of an object instanced on its parent's vertices or faces is hidden. Hair curves, point
-  clouds, volumes and grease pencil are reported and skipped.
+  of an object instanced on its parent's vertices or faces is hidden. Curves objects (hair)
+  become closed tubes around their control points (``_read_curves``, ``engine/hair.py``),
+  read as Cycles reads them. Particle hair, point clouds, volumes and grease pencil are
+  reported and skipped.
   Output: ``triangles`` (T, 3, 3) float32 [m], ``shading_normals`` (T, 3, 3) float32,
   ``material_ids`` (T,) int32 into ``materials``, ``object_ids`` (T,) int32 into
   ``object_names``.
@@ -152,6 +154,7 @@ import bpy
 
 from ..settings import RenderSettings
 from . import compat
+from .. import hair
 from .. import nodes
 from .. import textures
 from .world_export import (CAMERA_RAY, LIGHTING_RAY, constant_for_ray, decided_socket,
@@ -164,11 +167,12 @@ from ..scene import (AREA_SHAPES, AreaLight, Camera, Material, PointLight, Scene
 
 __all__ = ["export_scene", "export_settings", "material_from_nodes"]
 
-GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
-UNSUPPORTED_TYPES = {"CURVES", "POINTCLOUD", "VOLUME", "GREASEPENCIL", "GPENCIL"}
+GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES"}
+UNSUPPORTED_TYPES = {"POINTCLOUD", "VOLUME", "GREASEPENCIL", "GPENCIL"}
 COLLIMATED_SPREAD = 1e-3            # rad: below this an area light's Spread counts as zero
 DEFAULT_DIFFUSE = 0.8
 _LUMA = np.array([0.2126, 0.7152, 0.0722])   # colour -> float conversion of a linked socket
+CURVE_TYPE_POLY = 1                 # Blender's curve_type attribute value of a poly curve
 
 
 def _as_colour(v) -> np.ndarray:
@@ -302,6 +306,59 @@ def _read_mesh(mesh) -> _MeshData | None:
         tri_loops = np.arange(n_tri * 3, dtype=np.int32)
     return _MeshData(co.reshape(-1, 3), tri_verts, tri_loops, normals.reshape(-1, 3), mat_index,
                      corner_loops, uv_maps, active_uv, texspace)
+
+
+def curve_shape(scene) -> str:
+    """Cycles' Render > Curves > Shape of ``scene``: "RIBBONS", "THICK" or "THICK_LINEAR"."""
+    settings = getattr(scene, "cycles_curves", None)
+    return str(getattr(settings, "shape", "THICK")) if settings is not None else "THICK"
+
+
+def _read_curves(curves, shape: str, warn, owner: str) -> _MeshData | None:
+    """A Curves object's curves as tubes of triangles (``engine/hair.py``), read as Cycles
+    reads them (``sync_hair``): the control points themselves, the ``radius`` attribute or
+    0.005 m, a spline through the points unless the first curve is a poly curve or the
+    scene's shape is Linear 3D Curves, every curve with the object's first material, and the
+    first 2-D curve attribute (the surface UV of hair grown on a mesh) as its UV map."""
+    n_points, n_curves = len(curves.points), len(curves.curves)
+    if n_points == 0 or n_curves == 0:
+        return None
+    co = np.empty(n_points * 3, np.float32)
+    curves.position_data.foreach_get("vector", co)
+    offsets = np.empty(n_curves + 1, np.int32)
+    curves.curve_offset_data.foreach_get("value", offsets)
+    radius = _attribute(curves, "radius", "POINT", "FLOAT", "value", np.float32, n_points)
+    if radius is None:
+        radius = np.full(n_points, hair.DEFAULT_RADIUS, np.float32)
+    types = _attribute(curves, "curve_type", "CURVE", "INT8", "value", np.int8, n_curves)
+    smooth = shape != "THICK_LINEAR" and not (types is not None and types[0] == CURVE_TYPE_POLY)
+    try:
+        tubes = hair.tessellate_curves(co.reshape(-1, 3), radius, offsets, smooth=smooth)
+    except ValueError as exc:
+        warn(f"{owner}: its curves cannot be read ({exc}); skipped")
+        return None
+    if tubes.skipped:
+        warn(f"{owner}: skipped {tubes.skipped} curves with fewer than two points or with "
+             "non-finite positions or radii")
+    for note in tubes.notes:
+        warn(f"{owner}: {note}")
+    if shape == "RIBBONS":
+        warn(f"{owner}: Cycles' Rounded Ribbons are rendered as 3D curves (round tubes)")
+    if len(tubes.triangles) == 0:
+        return None
+    n_tri = len(tubes.triangles)
+    tri_verts = tubes.triangles.reshape(-1).astype(np.int32)
+    uv_maps, active = {}, ""
+    for attr in curves.attributes:
+        if attr.domain == "CURVE" and attr.data_type == "FLOAT2" \
+                and not attr.name.startswith("."):
+            uv = np.empty(n_curves * 2, np.float32)
+            attr.data.foreach_get("vector", uv)
+            uv_maps[attr.name] = uv.reshape(-1, 2)[tubes.vertex_curves]
+            active = attr.name
+            break
+    return _MeshData(tubes.vertices, tri_verts, tri_verts, tubes.normals,
+                     np.zeros(n_tri, np.int32), tri_verts, uv_maps, active, None)
 
 
 def _read_tangents(mesh, data: _MeshData, warn, owner: str) -> dict:
@@ -1491,6 +1548,21 @@ def _report_visibility(obj, warn) -> None:
             warn(f"Object '{name}': {label} is not supported; rendered as an ordinary object")
 
 
+def _report_particle_hair(obj, warn) -> None:
+    """Name the hair particle systems of ``obj`` that Cycles would draw and Lanterna does not
+    (Curves objects are drawn: Object > Convert > Curves turns a system into one)."""
+    for system in getattr(obj, "particle_systems", ()):
+        settings = system.settings
+        if settings.type != "HAIR" or settings.render_type != "PATH":
+            continue
+        modifier = next((m for m in obj.modifiers if m.type == "PARTICLE_SYSTEM"
+                         and m.particle_system == system), None)
+        if modifier is not None and not modifier.show_render:
+            continue
+        warn(f"Object '{obj.name}': particle hair '{system.name}' is not rendered (particle "
+             "hair is not supported; Object > Convert > Curves makes a Curves object, which is)")
+
+
 def _panorama(data, name: str) -> dict | None:
     """The ``scene.Camera`` fields of an equirectangular camera (its latitude and longitude
     ranges, on the Camera from Blender 4.0 on), or None for the other panoramic projections
@@ -1603,17 +1675,19 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
     portals = []           # Cycles light portals: windows of the world, not lights
 
     mesh_parents: set = set()    # objects whose geometry arrived as MESH instances
+    shape = curve_shape(scene)   # how Cycles draws curves
     curve_like = []              # non-mesh geometry objects, converted if no mesh arrived
 
-    def add_instance(obj, key, name, matrix):
+    def add_instance(obj, key, name, matrix, first_slot_only=False):
         """Queue one instance of the cached mesh ``key``; instances sharing a mesh and a
-        material mapping form one group, transformed together."""
+        material mapping form one group, transformed together. ``first_slot_only``: every
+        triangle takes the first slot's material (Cycles' curves)."""
         if mesh_cache[key] is None:
             return
         group_key = (obj.original.as_pointer(), key)
         group = groups.get(group_key)
         if group is None:
-            slots = obj.material_slots
+            slots = obj.material_slots[:1] if first_slot_only else obj.material_slots
             hidden = camera_hidden(obj)
             lut = np.array([material_id(s.material, hidden) for s in slots] if len(slots)
                            else [material_id(None, hidden)], dtype=np.int32)
@@ -1679,8 +1753,15 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
                 if hasattr(light, "camera_visible"):     # Object > Visibility > Camera
                     light.camera_visible = bool(getattr(obj, "visible_camera", False))
                 lights.append(light)
+        elif otype == "CURVES":
+            _report_visibility(obj, warn)
+            key = ("curves", obj.data.as_pointer())
+            if key not in mesh_cache:
+                mesh_cache[key] = _read_curves(obj.data, shape, warn, f"Object '{obj.name}'")
+            add_instance(obj, key, name, matrix, first_slot_only=True)
         elif otype == "MESH":
             _report_visibility(obj, warn)
+            _report_particle_hair(obj, warn)
             if parent is not None:
                 mesh_parents.add(parent.original.as_pointer())
             key = ("mesh", obj.data.as_pointer())

@@ -267,6 +267,9 @@ def make_reference(name: str, tmpdir: str, gi: bool = False, reuse_dir=None) -> 
         elif name in parity_scenes.CAMERA_SCENES:     # emitters in frame on purpose
             scene = parity_scenes.build(name)
             builder = f"tests/parity_scenes.py:{parity_scenes.CAMERA_SCENES[name].__name__}"
+        elif name in parity_scenes.GEOMETRY_SCENES:
+            scene = parity_scenes.build(name)
+            builder = f"tests/parity_scenes.py:{parity_scenes.GEOMETRY_SCENES[name].__name__}"
         else:
             scene = parity_scenes.build(name)
             builder = f"tests/parity_scenes.py:{parity_scenes.SCENES[name].__name__}"
@@ -757,7 +760,8 @@ def main(argv=None):
                               "made_by": "tests/data/make_cycles_refs.py --conventions"}
             (OUT / "conventions.json").write_text(json.dumps(table, indent=1) + "\n")
             return
-        known = list(parity_scenes.SCENES) + list(parity_scenes.CAMERA_SCENES)
+        known = list(parity_scenes.SCENES) + list(parity_scenes.CAMERA_SCENES) \
+            + list(parity_scenes.GEOMETRY_SCENES)
         names = args.scenes or known
         unknown = [n for n in names if n not in known]
         if unknown:
