@@ -36,10 +36,13 @@ Parameters
     R_MAX_PIXELS        64          the most a record reaches, in pixel footprints / a
     LOCAL_STEPS         (16, 4)     batch-local records: every 16th uncovered sample gathers,
                                     then every 4th of those still uncovered
+    STRAND_GATHER_DIVISOR  4        samples on hair (``Scene.strands``) take no record: each
+                                    gathers with M/4 x N/4 rays (at least 1 x 4)
     ==================  ==========  ==========================================================
 """
 from __future__ import annotations
 
+import copy
 from dataclasses import replace
 
 import numpy as np
@@ -55,6 +58,7 @@ CACHE_STRIDES = (32, 16, 8, 4, 2, 1)     # placement passes: every 32nd pixel, t
 R_MIN_PIXELS = 1.5                       # a record reaches at least this many pixels ...
 R_MAX_PIXELS = 64.0                      # ... and at most this many (R clamped, DESIGN §4)
 LOCAL_STEPS = (16, 4)   # batch-local records: every 16th uncovered sample, then every 4th left
+STRAND_GATHER_DIVISOR = 4   # hair samples gather with M/4 x N/4 rays each (CachedIndirect)
 
 
 class PhotonEstimate:
@@ -67,7 +71,7 @@ class PhotonEstimate:
         self.photon_map, self.k, self.max_radius = photon_map, k, max_radius
         self.min_bounces, self.cone_filter, self.lookups = min_bounces, cone_filter, lookups
 
-    def irradiance(self, x, ns, ng, rng, stats):
+    def irradiance(self, x, ns, ng, rng, stats, strands=None):
         return self.photon_map.irradiance(x, ng, k=self.k, max_radius=self.max_radius,
                                           min_bounces=self.min_bounces,
                                           cone_filter=self.cone_filter, stats=stats)
@@ -135,7 +139,7 @@ class FinalGather:
                             mirrored_emission=self.mirrored_emission, sky=self.sky,
                             split_sky=self.sky is not None)
 
-    def irradiance(self, x, ns, ng, rng, stats):
+    def irradiance(self, x, ns, ng, rng, stats, strands=None):
         return self.gather(x, ns, ng, rng, stats)[0]
 
     def surface_irradiance(self, x, n):
@@ -171,7 +175,9 @@ class CachedIndirect:
         """As ``FinalGather.surface_irradiance``."""
         return self.gather.surface_irradiance(x, n)
 
-    def irradiance(self, x, ns, ng, rng, stats):
+    def irradiance(self, x, ns, ng, rng, stats, strands=None):
+        if strands is not None and strands.any():
+            return self._with_strands(x, ns, ng, rng, stats, strands)
         e, covered, _w, _count = self.cache.interpolate(x, ns, self.a,
                                                         use_gradients=self.use_gradients)
         stats["cache_interpolated"] = stats.get("cache_interpolated", 0) + int(covered.sum())
@@ -186,6 +192,26 @@ class CachedIndirect:
         if gathered:
             stats["cache_gathered"] = stats.get("cache_gathered", 0) + gathered
         stats["covered_mask"] = covered          # taken by the batch for the Cache usage pass
+        return e
+
+
+    def _with_strands(self, x, ns, ng, rng, stats, strands):
+        """Samples on hair (``strands``) gather their own indirect light with M x N /
+        ``STRAND_GATHER_DIVISOR``^2 rays (a strand's normal turns all the way round within a
+        pixel, so a record serves almost none of its neighbours: a fur ball's camera stage
+        made a record at nearly every sample); the others as usual."""
+        e = np.zeros((len(x), self.channels))
+        plain = ~strands
+        covered = np.zeros(len(x), bool)
+        if plain.any():
+            e[plain] = self.irradiance(x[plain], ns[plain], ng[plain], rng, stats)
+            covered[plain] = stats.pop("covered_mask")
+        gather = copy.copy(self.gather)
+        gather.m = max(1, gather.m // STRAND_GATHER_DIVISOR)
+        gather.n = max(4, gather.n // STRAND_GATHER_DIVISOR)
+        e[strands] = gather.irradiance(x[strands], ns[strands], ng[strands], rng, stats)
+        stats["strand_gathered"] = stats.get("strand_gathered", 0) + int(strands.sum())
+        stats["covered_mask"] = covered
         return e
 
 
@@ -307,6 +333,8 @@ def place_cache(scene, accel, surfaces, gather: FinalGather, settings, pool, tel
     x = origins[hit] + t_hit[:, None] * d
     ng, ns, _front = surfaces.normals(prim, bu, bv, d)
     diffuse = surfaces.params(prim).is_diffuse
+    if scene.strands is not None:        # hair gathers per sample (CachedIndirect)
+        diffuse &= ~scene.strands[prim]
     pixel, x, ng, ns, t_hit = pixel[diffuse], x[diffuse], ng[diffuse], ns[diffuse], t_hit[diffuse]
     x_gather = into_own_triangle(x, scene.triangles[prim[diffuse]], accel.offset_distance(x))
     footprint = cam.footprint(t_hit)

@@ -100,7 +100,8 @@ from .textures import STRAIGHT_ON, ray_after_bounce
 BATCH_COUNTERS = ("camera_rays", "shadow_rays", "specular_rays", "glossy_rays", "paths_cut",
                   "trace_seconds", "queries",
                   "query_seconds", "estimate_seconds", "cache_interpolated", "cache_gathered",
-                  "cache_local_records", "cache_local_interpolated", "gather_rays",
+                  "cache_local_records", "cache_local_interpolated", "strand_gathered",
+                  "gather_rays",
                   "gather_points", "shadow_rays_saved", "shadow_lit", "shadow_umbra",
                   "shadow_penumbra", "edge_pixels", "edge_rays", "adaptive_pixels",
                   "adaptive_samples")
@@ -522,6 +523,12 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera, subset=
         x = sampling.scale_rows(d, t_hit)
         x += o
         ng, ns, front = surfaces.normals(prim, bu, bv, d)
+        if surfaces.strands is not None:
+            # Hair: from the round surface the tube stands for, rays leave off its normal.
+            on = np.flatnonzero(surfaces.strands[prim])
+            if len(on):
+                x[on] = surfaces.strand_points(prim[on], bu[on], bv[on], x[on])
+                ns[on] = ng[on] = surfaces.strand_normals(prim[on], bu[on], bv[on], d[on])
         surface = surfaces.params(prim, bu, bv, d, True if depth == 0 else cam,
                                   ray=None if not materials.reads_light_path else
                                   {**(path_values or {}), "Ray Length": t_hit})
@@ -625,7 +632,9 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera, subset=
                 ask = _asking(ask, rays[ask], spp, first_lookup, photon.lookups)
             if len(ask):
                 t0 = time.perf_counter()
-                e = photon.irradiance(x[ask], ns_smooth[ask], ng[ask], rng, stats)
+                strands = context.scene.strands
+                e = photon.irradiance(x[ask], ns_smooth[ask], ng[ask], rng, stats,
+                                      strands=None if strands is None else strands[prim[ask]])
                 stats["estimate_seconds"] += time.perf_counter() - t0
                 covered = stats.pop("covered_mask", None)
                 if usage is not None and covered is not None:

@@ -95,6 +95,7 @@ class RenderReport:
                    cache_gathered=t["cache_gathered"],
                    cache_local_records=t["cache_local_records"],
                    cache_local_interpolated=t["cache_local_interpolated"],
+                   strand_gathered=t["strand_gathered"],
                    edge_pixels=t["edge_pixels"], edge_rays=t["edge_rays"],
                    adaptive_pixels=t["adaptive_pixels"],
                    adaptive_samples=t["adaptive_samples"],

@@ -570,6 +570,10 @@ class Scene:
     # "tangent" / "tangent:<name>" (T, 3, 4) and "normal_matrix" (T, 3, 3), one matrix per
     # triangle, not per corner; ``engine/textures.py``).
     corner_attributes: dict = field(default_factory=dict)
+    # (T,) bool: the triangles of hair tubes (``engine/hair.py``), strands far thinner than
+    # the irradiance cache's records (``indirect.CachedIndirect`` gathers their indirect light
+    # per sample); None: none.
+    strands: np.ndarray | None = None
 
     def __post_init__(self):
         if self.object_ids is None:
@@ -639,6 +643,12 @@ class Scene:
         self.triangles = np.ascontiguousarray(tris[keep])
         self.material_ids = np.ascontiguousarray(mids[keep])
         self.object_ids = np.ascontiguousarray(oids[keep])
+        if self.strands is not None:
+            strands = np.asarray(self.strands, bool).reshape(-1)
+            if len(strands) != count:
+                raise SceneError(f"Scene: {len(strands)} strand flags for {count} triangles")
+            strands = strands[keep]
+            self.strands = np.ascontiguousarray(strands) if strands.any() else None
         if normals is not None:
             normals = normals[keep]
             bad = ~np.all(np.isfinite(normals), axis=(1, 2))

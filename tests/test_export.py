@@ -258,6 +258,7 @@ def test_hair_curves_render_as_tubes_as_cycles_reads_them():
         s.warnings
     for name in ("Plain", "Thick", "Poly") if has_poly else ("Plain", "Thick"):
         assert np.sum(s.object_ids == s.object_names.index(name)) > 0, name
+    assert [w for w in s.warnings if w.startswith("Hair ('Plain', 'Thick'")]   # dense hair
     plain_tris = s.triangles[s.object_ids == s.object_names.index("Plain")]
     assert np.all(s.material_ids[s.object_ids == s.object_names.index("Plain")]
                   == s.materials.index(material_of(s, "Red")))

@@ -233,6 +233,7 @@ class _MeshData:
     # corner: the colour and geometry attributes the mesh's materials read
     # (``_read_attributes``; read once per key)
     attributes: dict = dataclasses.field(default_factory=dict)
+    strands: bool = False   # hair tubes (``_read_curves``): ``Scene.strands``
 
     @property
     def count(self) -> int:
@@ -358,7 +359,7 @@ def _read_curves(curves, shape: str, warn, owner: str) -> _MeshData | None:
             active = attr.name
             break
     return _MeshData(tubes.vertices, tri_verts, tri_verts, tubes.normals,
-                     np.zeros(n_tri, np.int32), tri_verts, uv_maps, active, None)
+                     np.zeros(n_tri, np.int32), tri_verts, uv_maps, active, None, strands=True)
 
 
 def _read_tangents(mesh, data: _MeshData, warn, owner: str) -> dict:
@@ -1676,6 +1677,7 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
 
     mesh_parents: set = set()    # objects whose geometry arrived as MESH instances
     shape = curve_shape(scene)   # how Cycles draws curves
+    hair_objects: dict = {}      # names of the Curves objects drawn, in order
     curve_like = []              # non-mesh geometry objects, converted if no mesh arrived
 
     def add_instance(obj, key, name, matrix, first_slot_only=False):
@@ -1759,6 +1761,8 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
             if key not in mesh_cache:
                 mesh_cache[key] = _read_curves(obj.data, shape, warn, f"Object '{obj.name}'")
             add_instance(obj, key, name, matrix, first_slot_only=True)
+            if mesh_cache[key] is not None:
+                hair_objects.setdefault(obj.name)
         elif otype == "MESH":
             _report_visibility(obj, warn)
             _report_particle_hair(obj, warn)
@@ -1813,6 +1817,7 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
     normals = np.empty((total, 3, 3), np.float32)
     material_ids = np.empty(total, np.int32)
     object_ids = np.empty(total, np.int32)
+    strands = np.zeros(total, bool)
     flat_tris = triangles.reshape(-1, 3)
     flat_normals = normals.reshape(-1, 3)
     start = 0
@@ -1843,6 +1848,7 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
             _gather_rows(cn.reshape(-1, 3), loop_index, flat_normals[3 * start:3 * end])
             material_ids[start:end].reshape(n, n_tri)[:] = tri_mats
             object_ids[start:end] = np.repeat(group.object_ids[c0:c0 + step], n_tri)
+            strands[start:end] = data.strands
             start = end
 
     width = {"uv": 2, "tangent": 4, "color": 4, "attr": 4}
@@ -1860,11 +1866,16 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
                 block[:] = _corner_attribute(group.data, key)
         start += n * n_tri
 
+    if hair_objects:
+        warn(f"Hair ({', '.join(repr(n) for n in hair_objects)}): the light bounced between "
+             "strands comes out dark where hair is dense (a fur ball's core: 24 % below "
+             "Cycles, its direct light 6 %; docs/usage.md)")
     world = _export_world(scene_eval.world, warn, portals)
     out = Scene(triangles=triangles, material_ids=material_ids, materials=materials,
                 camera=camera, shading_normals=normals, object_ids=object_ids,
                 object_names=object_names, lights=lights, world=world,
-                warnings=list(warn.messages), corner_attributes=corner_attributes)
+                warnings=list(warn.messages), corner_attributes=corner_attributes,
+                strands=strands if strands.any() else None)
     out.validate()
     out.warnings = list(dict.fromkeys(out.warnings))
     out.stats.update({
