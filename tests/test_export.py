@@ -248,7 +248,10 @@ def test_hair_curves_render_as_tubes_as_cycles_reads_them():
     bent = np.array([[1.0, 0.0, 0.0], [1.0, 0.0, 1.0], [2.0, 0.0, 1.5]])
     plain = add_curves(scene, "Plain", [straight], materials=(red, blue))
     plain.location = (-3.0, 0.0, 0.0)
-    add_curves(scene, "Thick", [bent], radius=0.02)
+    tinted = new_material("Tinted")              # reads a colour attribute hair lacks
+    attribute = tinted.node_tree.nodes.new("ShaderNodeVertexColor")
+    tinted.node_tree.links.new(attribute.outputs["Color"], principled(tinted).inputs["Base Color"])
+    add_curves(scene, "Thick", [bent], radius=0.02, materials=(tinted,))
     has_poly = hasattr(bpy.types.Curves, "set_types")       # Blender 4.3 on
     if has_poly:
         add_curves(scene, "Poly", [bent], radius=0.02, poly=True).location = (0.0, 3.0, 0.0)
@@ -259,6 +262,8 @@ def test_hair_curves_render_as_tubes_as_cycles_reads_them():
     for name in ("Plain", "Thick", "Poly") if has_poly else ("Plain", "Thick"):
         assert np.sum(s.object_ids == s.object_names.index(name)) > 0, name
     assert [w for w in s.warnings if w.startswith("Hair ('Plain', 'Thick'")]   # dense hair
+    said = [w for w in s.warnings if "which hair does not carry" in w]
+    assert len(said) == 1 and "'Thick'" in said[0] and "'Tinted' reads color" in said[0]
     plain_tris = s.triangles[s.object_ids == s.object_names.index("Plain")]
     assert np.all(s.material_ids[s.object_ids == s.object_names.index("Plain")]
                   == s.materials.index(material_of(s, "Red")))
@@ -277,19 +282,40 @@ def test_hair_curves_render_as_tubes_as_cycles_reads_them():
     assert len(said) == 2 + has_poly and "'Plain'" in said[0]
 
 
-def test_particle_hair_is_named_not_silently_dropped():
+def test_particle_hair_renders_as_tubes_as_cycles_reads_it():
+    """A hair particle system: every strand's keys from co_hair (2^steps + 1 of them), radius
+    Radius Scale / 2 x Root at the root, closed at the tip, the system's material slot; off
+    with its modifier's render switch."""
     scene = reset()
     add_camera(scene)
     cube = add_cube(scene, "Furry")
+    cube.data.materials.append(new_material("Skin"))
+    cube.data.materials.append(new_material("Fur"))
     modifier = cube.modifiers.new("Fur", "PARTICLE_SYSTEM")
-    modifier.particle_system.settings.type = "HAIR"
-    modifier.particle_system.settings.count = 10
+    settings = modifier.particle_system.settings
+    settings.type, settings.count, settings.hair_length = "HAIR", 10, 0.5
+    settings.radius_scale, settings.root_radius, settings.material = 0.02, 1.0, 2
+    settings.display_step = settings.render_step = 2
     s = export()
-    said = [w for w in s.warnings if "particle hair" in w]
-    assert len(said) == 1 and "'Furry'" in said[0] and "Convert > Curves" in said[0]
-    assert np.sum(s.object_ids == s.object_names.index("Furry")) == 12     # the cube itself
-    modifier.show_render = False
-    assert not [w for w in export().warnings if "particle hair" in w]
+    assert not [w for w in s.warnings if "not rendered" in w]
+    assert [w for w in s.warnings if w.startswith("Hair ('Furry')")]
+    mine = s.object_ids == s.object_names.index("Furry")
+    fur = mine & (s.material_ids == s.materials.index(material_of(s, "Fur")))
+    assert np.sum(mine & ~fur) == 12                       # the cube itself, in Skin
+    keys = 2 ** 2 + 1
+    dg = bpy.context.evaluated_depsgraph_get()
+    evaluated = cube.evaluated_get(dg)
+    system = evaluated.particle_systems[0]
+    roots = np.array([system.co_hair(evaluated, particle_no=i, step=0) for i in range(10)])
+    tips = np.array([system.co_hair(evaluated, particle_no=i, step=keys - 1) for i in range(10)])
+    corners = s.triangles[fur].reshape(-1, 3).astype(np.float64)
+    widen = (math.pi / 6) / math.sin(math.pi / 6)
+    for root, tip in zip(roots, tips):
+        near_root = np.linalg.norm(corners - root, axis=1)
+        assert near_root.min() == pytest.approx(0.01 * widen, rel=1e-3)     # the root's ring
+        assert np.linalg.norm(corners - tip, axis=1).min() < 1e-6            # closed at the tip
+    modifier.show_viewport = False
+    assert np.sum(export().object_ids == s.object_names.index("Furry")) == 12
 
 
 # ---------------------------------------------------------------------------------------------

@@ -14,10 +14,11 @@ animation already applied by Blender) and turns it into the renderer's inert sce
   in numpy. The triangles of one mesh datablock are read once however often it is instanced,
   and all instances of one mesh are transformed together (one batch of numpy per mesh). Render
   visibility follows Blender: Disable in Renders, Show Instancer for Render, and the original
-  of an object instanced on its parent's vertices or faces is hidden. Curves objects (hair)
-  become closed tubes around their control points (``_read_curves``, ``engine/hair.py``),
-  read as Cycles reads them. Particle hair, point clouds, volumes and grease pencil are
-  reported and skipped.
+  of an object instanced on its parent's vertices or faces is hidden. Hair, Curves objects
+  (``_read_curves``) and hair particle systems (``_read_particle_hair``, keys from
+  ``co_hair``), becomes closed tubes around its strands (``engine/hair.py``), read as Cycles
+  reads it; ``Scene.strands`` flags their triangles. Point clouds, volumes and grease pencil
+  are reported and skipped.
   Output: ``triangles`` (T, 3, 3) float32 [m], ``shading_normals`` (T, 3, 3) float32,
   ``material_ids`` (T,) int32 into ``materials``, ``object_ids`` (T,) int32 into
   ``object_names``.
@@ -1549,19 +1550,75 @@ def _report_visibility(obj, warn) -> None:
             warn(f"Object '{name}': {label} is not supported; rendered as an ordinary object")
 
 
-def _report_particle_hair(obj, warn) -> None:
-    """Name the hair particle systems of ``obj`` that Cycles would draw and Lanterna does not
-    (Curves objects are drawn: Object > Convert > Curves turns a system into one)."""
-    for system in getattr(obj, "particle_systems", ()):
+def _particle_hair(obj, depsgraph):
+    """The hair particle systems of ``obj`` that Cycles draws (Hair, rendered as Path, its
+    modifier on for this depsgraph): [(system index, settings), ...]."""
+    render = getattr(depsgraph, "mode", "RENDER") == "RENDER"
+    out = []
+    for index, system in enumerate(getattr(obj, "particle_systems", ())):
         settings = system.settings
         if settings.type != "HAIR" or settings.render_type != "PATH":
             continue
         modifier = next((m for m in obj.modifiers if m.type == "PARTICLE_SYSTEM"
                          and m.particle_system == system), None)
-        if modifier is not None and not modifier.show_render:
+        if modifier is not None and not (modifier.show_render if render
+                                         else modifier.show_viewport):
             continue
-        warn(f"Object '{obj.name}': particle hair '{system.name}' is not rendered (particle "
-             "hair is not supported; Object > Convert > Curves makes a Curves object, which is)")
+        out.append((index, settings))
+    return out
+
+
+def _read_particle_hair(obj, index: int, render: bool, warn) -> tuple:
+    """One hair particle system of the evaluated ``obj`` as Cycles reads it
+    (``ObtainCacheParticleData``): the children where there are any, else the parents; 2^steps
+    + 1 keys per strand (Render Steps, or Viewport Display Steps outside a final render;
+    Spiral kink adds its extra steps) from ``co_hair`` (world space); radius
+    Radius Scale / 2 x (Root ... Tip, bent by Shape along the strand's length), 0 at the last
+    key with Close Tip. Returns (tubes' _MeshData in world space or None, material slot)."""
+    system = obj.particle_systems[index]
+    settings = system.settings
+    parents, children = len(system.particles), len(system.child_particles)
+    has_children = settings.child_type != "NONE" and children > 0
+    first = parents if has_children else 0
+    count = parents + children - first if has_children else parents
+    keys = 2 ** (settings.render_step if render else settings.display_step) + 1
+    if settings.kink == "SPIRAL":
+        keys += settings.kink_extra_steps
+    slot = max(int(settings.material) - 1, 0)
+    if count == 0:
+        return None, slot
+    points = np.empty((count, keys, 3))
+    co_hair = system.co_hair
+    for i in range(count):                     # one call per key: Blender has no bulk read
+        row = points[i]
+        for k in range(keys):
+            row[k] = co_hair(obj, particle_no=first + i, step=k)
+    length = np.concatenate([np.zeros((count, 1)), np.cumsum(
+        np.linalg.norm(np.diff(points, axis=1), axis=2), axis=1)], axis=1)
+    time_ = np.divide(length, length[:, -1:], out=np.zeros_like(length),
+                      where=length[:, -1:] > 0)
+    scale = 0.5 * float(settings.radius_scale)
+    root, tip, shape = scale * float(settings.root_radius), scale * float(settings.tip_radius), \
+        float(settings.shape)
+    falloff = 1.0 - time_
+    if shape < 0:
+        falloff = falloff ** (1.0 + shape)
+    elif shape > 0:
+        falloff = falloff ** (1.0 / (1.0 - shape))
+    radius = falloff * (root - tip) + tip
+    if settings.use_close_tip:
+        radius[:, -1] = 0.0
+    tubes = hair.tessellate_curves(points.reshape(-1, 3), radius.reshape(-1),
+                                   np.arange(0, count * keys + 1, keys))
+    owner = f"Object '{obj.name}', particle hair '{system.name}'"
+    for note in tubes.notes:
+        warn(f"{owner}: {note}")
+    if len(tubes.triangles) == 0:
+        return None, slot
+    tri_verts = tubes.triangles.reshape(-1).astype(np.int32)
+    return _MeshData(tubes.vertices, tri_verts, tri_verts, tubes.normals,
+                     np.zeros(len(tubes.triangles), np.int32), tri_verts, {}, "", None,
+                     strands=True), slot
 
 
 def _panorama(data, name: str) -> dict | None:
@@ -1680,16 +1737,18 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
     hair_objects: dict = {}      # names of the Curves objects drawn, in order
     curve_like = []              # non-mesh geometry objects, converted if no mesh arrived
 
-    def add_instance(obj, key, name, matrix, first_slot_only=False):
+    def add_instance(obj, key, name, matrix, slot=None):
         """Queue one instance of the cached mesh ``key``; instances sharing a mesh and a
-        material mapping form one group, transformed together. ``first_slot_only``: every
-        triangle takes the first slot's material (Cycles' curves)."""
+        material mapping form one group, transformed together. ``slot``: every triangle takes
+        that material slot's material (Cycles' curves and particle hair)."""
         if mesh_cache[key] is None:
             return
         group_key = (obj.original.as_pointer(), key)
         group = groups.get(group_key)
         if group is None:
-            slots = obj.material_slots[:1] if first_slot_only else obj.material_slots
+            slots = obj.material_slots
+            if slot is not None:
+                slots = slots[slot:slot + 1] if slot < len(slots) else slots[:1]
             hidden = camera_hidden(obj)
             lut = np.array([material_id(s.material, hidden) for s in slots] if len(slots)
                            else [material_id(None, hidden)], dtype=np.int32)
@@ -1698,6 +1757,20 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
         group.names.append(name)
 
     material_keys: dict = {}     # material id -> the corner attributes it reads
+
+    def hair_reads(obj, slot, missing, owner) -> None:
+        """Warn when the material in ``slot`` of a hair object reads coordinates its strands
+        do not carry (``missing`` key prefixes): they read 0 there."""
+        slots = obj.material_slots
+        mat = slots[slot].material if slot < len(slots) else (slots[0].material if len(slots)
+                                                               else None)
+        i = material_id(mat, camera_hidden(obj))
+        if i not in material_keys:
+            material_keys[i] = _material_coordinates(materials[i])
+        unread = sorted(k for k in material_keys[i] if k.startswith(missing))
+        if unread:
+            warn(f"{owner}: its material '{materials[i].name}' reads {', '.join(unread)}, "
+                 "which hair does not carry here; they read 0 on the strands")
 
     def read_tangents(obj, mesh, data) -> None:
         """The mesh's tangents, once, when a material of ``obj`` has a shading normal; the
@@ -1760,12 +1833,23 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
             key = ("curves", obj.data.as_pointer())
             if key not in mesh_cache:
                 mesh_cache[key] = _read_curves(obj.data, shape, warn, f"Object '{obj.name}'")
-            add_instance(obj, key, name, matrix, first_slot_only=True)
+            add_instance(obj, key, name, matrix, slot=0)
             if mesh_cache[key] is not None:
                 hair_objects.setdefault(obj.name)
+                hair_reads(obj, 0, ("color", "attr:", "tangent"), f"Object '{obj.name}'")
         elif otype == "MESH":
             _report_visibility(obj, warn)
-            _report_particle_hair(obj, warn)
+            if not inst.is_instance:
+                for index, _settings in _particle_hair(obj, depsgraph):
+                    key = ("particles", obj.original.as_pointer(), index)
+                    if key not in mesh_cache:
+                        mesh_cache[key], slot = _read_particle_hair(
+                            obj, index, getattr(depsgraph, "mode", "RENDER") == "RENDER", warn)
+                    add_instance(obj, key, name, np.eye(4), slot=slot)
+                    if mesh_cache[key] is not None:
+                        hair_objects.setdefault(obj.name)
+                        hair_reads(obj, slot, ("uv", "color", "attr:", "tangent"),
+                                   f"Object '{obj.name}', particle hair")
             if parent is not None:
                 mesh_parents.add(parent.original.as_pointer())
             key = ("mesh", obj.data.as_pointer())
