@@ -112,12 +112,13 @@ def write(path: Path, sweeps: dict, throughput: dict, minutes: float) -> None:
               f"{ph['trace_seconds']:.2f} s, kd-tree {ph['build_seconds']:.2f} s; a "
               f"`photon-map` render at 640 × 480 takes "
               f"{ph['photon_map_render']['total_seconds']:.1f} s."]
+    from .hair import SECTION_TITLE as HAIR_TITLE
     from .materials import SUITES, section_of
     from .texture_cost import SECTION_TITLE as TEXTURES_TITLE
 
     text = path.read_text(encoding="utf-8") if path.is_file() else ""
     # bench/materials.py's and bench/texture_cost.py's sections: rewritten only by them
-    for title in [suite.section for suite in SUITES.values()] + [TEXTURES_TITLE]:
+    for title in [suite.section for suite in SUITES.values()] + [TEXTURES_TITLE, HAIR_TITLE]:
         kept = section_of(text, title)
         if kept:
             lines += ["", kept.rstrip("\n")]

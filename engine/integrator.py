@@ -523,9 +523,10 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera, subset=
         x = sampling.scale_rows(d, t_hit)
         x += o
         ng, ns, front = surfaces.normals(prim, bu, bv, d)
-        if surfaces.strands is not None:
+        strands = getattr(surfaces, "strands", None)
+        if strands is not None:
             # Hair: from the round surface the tube stands for, rays leave off its normal.
-            on = np.flatnonzero(surfaces.strands[prim])
+            on = np.flatnonzero(strands[prim])
             if len(on):
                 x[on] = surfaces.strand_points(prim[on], bu[on], bv[on], x[on])
                 ns[on] = ng[on] = surfaces.strand_normals(prim[on], bu[on], bv[on], d[on])

@@ -34,7 +34,7 @@ import numpy as np
 
 from .accel import Accelerator
 from .artifacts import Artifacts, scene_fingerprint
-from .gather import RadianceEstimates
+from .gather import RadianceEstimates, StrandEstimates
 from .indirect import CachedIndirect, CausticEstimate, FinalGather, PhotonEstimate, place_cache
 from .lights import LightSet
 from .photons import (CAUSTIC_PILOT, MIN_CAUSTIC_FLUX, STRONG_CAUSTIC_PASS, auto_caustic_stored, auto_max_radius, auto_photon_count,
@@ -218,9 +218,16 @@ def _photons(prep: Prepared, scene, settings, tell, cancelled, artifacts):
         tell(0.0, "Precomputing irradiance at photons")
         estimates = RadianceEstimates.build(pmap, k=settings.photon_k, max_radius=radius,
                                             pool=pool)
-        report.stage("radiance_estimates", estimates.stats["seconds"],
+        strand_stats = {}
+        if scene.strands is not None:          # hair: estimates of their own
+            estimates.strands = StrandEstimates.build(pmap, prep.accel, scene.triangles,
+                                                      scene.strands, seed=settings.seed)
+            strand_stats = estimates.strands.stats
+        report.stage("radiance_estimates",
+                     estimates.stats["seconds"] + strand_stats.get("seconds", 0.0),
                      estimates=estimates.stats["estimates"],
-                     bytes=estimates.stats.get("bytes", 0))
+                     bytes=estimates.stats.get("bytes", 0),
+                     **{k: v for k, v in strand_stats.items() if k != "seconds"})
         # With direct light computed, the smooth part of an image world with a sun goes to
         # the gather (``lights.EnvironmentLight.gather_sky``): its light samples keep the sun.
         sky = prep.lights.gather_sky() if settings.mode == "full" else None

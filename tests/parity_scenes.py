@@ -438,6 +438,34 @@ def hair():
     return scene
 
 
+FUR_REGIONS = {"fur": (slice(70, 115), slice(15, 75)), "core": (slice(80, 105), slice(25, 65)),
+               "floor": (slice(100, 120), slice(110, 160))}     # rows, columns at 160 x 120
+
+
+def fur_ball(strands: int = 20000):
+    """``sun``'s room at 160 x 120 with a fur ball left of the box: a UV sphere (radius 0.5 m,
+    centre (-1, -1, 0)) with ``strands`` Catmull-Rom strands on its upper half (6 points,
+    0.25 m long along the normal, slightly bent, radius 4 mm at the root tapering to 0),
+    Principled (0.6, 0.4, 0.2), 3D Curves; ``FUR_REGIONS`` name the fur, its core and the open
+    floor. For ``lanterna bench --hair``, not a stored reference."""
+    scene = sun()
+    scene.cycles_curves.shape = "THICK"
+    scene.render.resolution_x, scene.render.resolution_y = 160, 120
+    rng = np.random.default_rng(1)
+    normal = rng.normal(size=(strands, 3))
+    normal /= np.linalg.norm(normal, axis=1)[:, None]
+    normal[:, 2] = np.abs(normal[:, 2])
+    centre, radius, s = np.array([-1.0, -1.0, 0.0]), 0.5, np.linspace(0.0, 1.0, 6)
+    bend = rng.normal(size=(strands, 3)) * 0.05
+    points = (centre + radius * normal[:, None, :] + 0.25 * s[None, :, None] * normal[:, None, :]
+              + bend[:, None, :] * s[None, :, None] ** 2)
+    mat = _material_principled("Fur", (0.6, 0.4, 0.2))
+    _curves_object(scene, "Fur", [(p, 0.004 * (1.0 - s)) for p in points], mat)
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=radius, location=tuple(centre))
+    bpy.context.object.data.materials.append(mat)
+    return scene
+
+
 # Window columns holding each emitter's image in ``bokeh`` (at 64 x 48).
 BOKEH_REGIONS = {"far": (0, 32), "near": (32, 64)}
 BOKEH_BLADES, BOKEH_RATIO = 5, 1.4
