@@ -16,7 +16,7 @@ extension zips leave this folder out, and ``lanterna bench`` finds it only in a 
                              room's ``final`` against its textures' means (issue 24)
     ``floor_sharpness.py``   ``--sharpness``: the textured room's floor against a plain one,
                              blur or noise (issue 24)
-    ``hair.py``              ``--hair``: a fur ball's ``final`` against Cycles' 3D curves
+    ``hair_vs_cycles.py``    ``--hair``: a fur ball's ``final`` against Cycles' 3D curves
     ``cache_index.py``       ``--cache-index``: the irradiance cache's grid against its kd-tree
     ``validation.py``        ``--validation``: writes docs/validation.md
     ``performance.py``       ``--performance``: writes docs/performance.md (runs the sweep)

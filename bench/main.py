@@ -31,7 +31,7 @@ Parameters
     cost estimate, then check it on the seed scenes) and ``--check-estimate`` (the check
     alone) hand over to ``bench/calibrate.py``, ``--sweep`` to ``bench/sweep.py``,
     ``--materials`` to ``bench/materials.py``, ``--textures`` to ``bench/texture_cost.py``,
-    ``--hair`` to ``bench/hair.py``,
+    ``--hair`` to ``bench/hair_vs_cycles.py``,
     ``--sharpness`` to ``bench/floor_sharpness.py``,
     ``--vs-cycles`` to ``bench/vs_cycles.py`` and
     ``--cache-index`` to ``bench/cache_index.py``.
@@ -57,7 +57,7 @@ def main(argv=None) -> int:
         from .materials import main as materials_main
         return materials_main([a for a in argv if a != "--materials"])
     if "--hair" in argv:  # hair against Cycles (hair.py)
-        from .hair import main as hair_main
+        from .hair_vs_cycles import main as hair_main
         return hair_main([a for a in argv if a != "--hair"])
     if "--textures" in argv:  # issue 24: what textures add to final (textures.py)
         from .texture_cost import main as textures_main
@@ -92,7 +92,7 @@ def main(argv=None) -> int:
                              "scenes (with --worlds: the HDRI world scenes); see "
                              "bench/materials.py (--materials --help)")
     parser.add_argument("--hair", action="store_true",
-                        help="a fur ball's final against Cycles' 3D curves; see bench/hair.py")
+                        help="a fur ball's final against Cycles' 3D curves; see bench/hair_vs_cycles.py")
     parser.add_argument("--textures", action="store_true",
                         help="what texture evaluation adds to the textured room's final, "
                              "against the same scene with each texture's mean; see "

@@ -112,7 +112,7 @@ def write(path: Path, sweeps: dict, throughput: dict, minutes: float) -> None:
               f"{ph['trace_seconds']:.2f} s, kd-tree {ph['build_seconds']:.2f} s; a "
               f"`photon-map` render at 640 × 480 takes "
               f"{ph['photon_map_render']['total_seconds']:.1f} s."]
-    from .hair import SECTION_TITLE as HAIR_TITLE
+    from .hair_vs_cycles import SECTION_TITLE as HAIR_TITLE
     from .materials import SUITES, section_of
     from .texture_cost import SECTION_TITLE as TEXTURES_TITLE
 

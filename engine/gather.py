@@ -8,6 +8,10 @@ What it computes
         k-photon estimate: reflected radiance L = rho_d / pi * E of the nearest precomputed
         point whose normal agrees (n . n_i > 0.5). Christensen reports 5-7x faster final
         gathering; the blur it adds is hidden behind the gather's own averaging.
+    ``StrandEstimates.build(photon_map, accel, triangles, strands)``  the same on hair
+        (``Scene.strands``), where the surface estimate fails: the flux landing on strands
+        in a sphere over the strands' own area in it, with the light's direction (its
+        docstring); gather rays that meet hair read these.
     ``final_gather(points, normals, ...)``  indirect irradiance at shading points by the
         stratified final gather: M x N cosine-distributed directions per point,
         theta_j = asin(sqrt((j + xi1) / M)), phi_k = 2 pi (k + xi2) / N (Eq. 8.4-8.6), so that
@@ -47,6 +51,9 @@ Parameters
                                    used 1/4); at most ``max_estimates``
     max_estimates        400 000   cap on the precomputed estimates (time and memory)
     k                    50        photons per precomputed estimate
+    AREA_POINTS          2         hair: points spread over the strands' area per photon on a
+                                   strand; AREA_NEIGHBOURS = 64 of them set a sphere, which
+                                   may hold MAX_SPHERE_PHOTONS = 256 photons
     max_specular         4         specular bounces a gather ray may take (the plan: 8 with
                                    glass)
     ROULETTE_WEIGHT      0.5       a continuation of smaller weight goes on by roulette

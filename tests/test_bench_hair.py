@@ -1,8 +1,8 @@
-"""``lanterna bench --hair`` (bench/hair.py): its pure parts, no renders."""
+"""``lanterna bench --hair`` (bench/hair_vs_cycles.py): its pure parts, no renders."""
 import numpy as np
 import pytest
 
-from lanterna.bench import hair as bench_hair
+from lanterna.bench import hair_vs_cycles as bench_hair
 from lanterna.bench.materials import section_of
 
 

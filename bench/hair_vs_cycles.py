@@ -63,7 +63,7 @@ def section_markdown(d: dict) -> str:
     return "\n".join([
         SECTION_TITLE, "",
         f"Measured {d['date']} on {d['machine']}, Blender {d['blender']}. Regenerate with "
-        f"`{PROG}` from a checkout (`bench/hair.py`, whose docstring defines every figure; it "
+        f"`{PROG}` from a checkout (`bench/hair_vs_cycles.py`, whose docstring defines every figure; it "
         f"rewrites this section only). `tests/parity_scenes.py`'s fur ball ({d['strands']:,} "
         f"strands, {d['triangles']:,} triangles, 160 × 120) against Cycles' 3D Curves at "
         f"{d['reference_samples']} spp; error = relative RMSE of the luminance, region columns "
