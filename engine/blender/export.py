@@ -1952,8 +1952,8 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
 
     if hair_objects:
         warn(f"Hair ({', '.join(repr(n) for n in hair_objects)}): the light bounced between "
-             "strands comes out dark where hair is dense (a fur ball's core: 11 % below "
-             "Cycles, its direct light 6 %; docs/usage.md)")
+             "strands comes out dark where hair is dense (a fur ball's core: 12 % below "
+             "Cycles, its direct light alone 7 %; docs/usage.md)")
     world = _export_world(scene_eval.world, warn, portals)
     out = Scene(triangles=triangles, material_ids=material_ids, materials=materials,
                 camera=camera, shading_normals=normals, object_ids=object_ids,
