@@ -232,6 +232,9 @@ def scene_parts(scene) -> dict:
         h.update(b"flat")
     else:
         h.update(np.ascontiguousarray(scene.shading_normals, np.float32).tobytes())
+    if scene.strands is not None:           # hair changes the photons kept and their estimates
+        h.update(b"strands")
+        h.update(np.packbits(np.asarray(scene.strands, bool)).tobytes())
     parts["geometry"] = h.hexdigest()
     h = hashlib.sha256()
     h.update(np.ascontiguousarray(scene.material_ids, np.int32).tobytes())

@@ -194,7 +194,6 @@ class CachedIndirect:
         stats["covered_mask"] = covered          # taken by the batch for the Cache usage pass
         return e
 
-
     def _with_strands(self, x, ns, ng, rng, stats, strands):
         """Samples on hair (``strands``) gather their own indirect light with M x N /
         ``STRAND_GATHER_DIVISOR``^2 rays (a strand's normal turns all the way round within a

@@ -334,3 +334,14 @@ def test_photons_between_strands_are_no_crevice():
     assert in_crevice(dataclasses.replace(scene, strands=None), accel, pmap).tolist() \
         == [True, True, False]
     assert in_crevice(scene, accel, pmap).tolist() == [False, False, False]
+
+
+def test_a_saved_map_of_the_same_triangles_without_hair_is_not_reused():
+    """Hair changes which photons are kept and how they are estimated: the artifacts'
+    geometry fingerprint takes the strand flags (and is unchanged without hair)."""
+    import dataclasses
+    from lanterna.engine.artifacts import scene_parts
+    scene, _ = tube_scene(turns=2)
+    plain = dataclasses.replace(scene, strands=None)
+    assert scene_parts(scene)["geometry"] != scene_parts(plain)["geometry"]
+    assert scene_parts(scene)["materials"] == scene_parts(plain)["materials"]
