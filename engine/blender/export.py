@@ -14,11 +14,11 @@ animation already applied by Blender) and turns it into the renderer's inert sce
   in numpy. The triangles of one mesh datablock are read once however often it is instanced,
   and all instances of one mesh are transformed together (one batch of numpy per mesh). Render
   visibility follows Blender: Disable in Renders, Show Instancer for Render, and the original
-  of an object instanced on its parent's vertices or faces is hidden. Hair, Curves objects
-  (``_read_curves``) and hair particle systems (``_read_particle_hair``, keys from
-  ``co_hair``), becomes closed tubes around its strands (``engine/hair.py``), read as Cycles
-  reads it; ``Scene.strands`` flags their triangles. Point clouds, volumes and grease pencil
-  are reported and skipped.
+  of an object instanced on its parent's vertices or faces is hidden. Hair (Curves objects:
+  ``_read_curves``; hair particle systems: ``_read_particle_hair``, keys from ``co_hair``)
+  becomes closed tubes around its strands (``engine/hair.py``), read as Cycles reads it;
+  ``Scene.strands`` flags their triangles. Point clouds, volumes and grease pencil are
+  reported and skipped.
   Output: ``triangles`` (T, 3, 3) float32 [m], ``shading_normals`` (T, 3, 3) float32,
   ``material_ids`` (T,) int32 into ``materials``, ``object_ids`` (T,) int32 into
   ``object_names``.
@@ -1734,7 +1734,7 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
 
     mesh_parents: set = set()    # objects whose geometry arrived as MESH instances
     shape = curve_shape(scene)   # how Cycles draws curves
-    hair_objects: dict = {}      # names of the Curves objects drawn, in order
+    hair_objects: dict = {}      # names of the objects whose hair is drawn, in order
     curve_like = []              # non-mesh geometry objects, converted if no mesh arrived
 
     def add_instance(obj, key, name, matrix, slot=None):
@@ -1836,7 +1836,9 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
             add_instance(obj, key, name, matrix, slot=0)
             if mesh_cache[key] is not None:
                 hair_objects.setdefault(obj.name)
-                hair_reads(obj, 0, ("color", "attr:", "tangent"), f"Object '{obj.name}'")
+                lacks = ("color", "attr:", "tangent") + (() if mesh_cache[key].uv_maps
+                                                         else ("uv",))
+                hair_reads(obj, 0, lacks, f"Object '{obj.name}'")
         elif otype == "MESH":
             _report_visibility(obj, warn)
             if not inst.is_instance:
