@@ -67,6 +67,12 @@ class Tubes:
     vertex_curves: np.ndarray   # (V,) int32: the input curve each vertex belongs to
     skipped: int = 0            # curves skipped (fewer than two points, non-finite values)
     notes: list = field(default_factory=list)
+    # Cycles' Curves Info per vertex: the intercept (0 at the root, 1 at the tip, by the
+    # length along the points, linear within a piece), the curve's length through its points
+    # [m], and the radius [m] (the round curve's, not the widened polygon's).
+    vertex_intercept: np.ndarray | None = None   # (V,) float32
+    vertex_length: np.ndarray | None = None      # (V,) float32
+    vertex_radius: np.ndarray | None = None      # (V,) float32
 
 
 def _empty(skipped: int, notes: list) -> Tubes:
@@ -196,6 +202,17 @@ def tessellate_curves(points, radii, offsets, *, smooth: bool = True, sides: int
     radius = np.maximum(radius, 0.0)
     ring_curve = np.repeat(np.arange(len(curve_ids)), ring_count)
 
+    # Cycles' intercept: the length along the points, normalised, linear within a piece.
+    seg = np.linalg.norm(p2 - p1, axis=1)
+    run = np.cumsum(seg) - seg                     # length before each piece, from the root
+    run -= np.repeat(run[np.cumsum(n_pieces) - n_pieces], n_pieces)
+    curve_length = np.bincount(piece_curve, weights=seg, minlength=len(curve_ids))
+    whole = np.where(curve_length > 0, curve_length, 1.0)
+    intercept = np.empty(n_rings)
+    intercept[ring_of_sample] = ((run[sample_piece] + seg[sample_piece] * t[:, 0])
+                                 / whole[piece_curve[sample_piece]])
+    intercept[end_ring] = np.where(curve_length > 0, 1.0, 0.0)
+
     # Tangents by differences along the rings; the radius' slope along the arc.
     index = np.arange(n_rings)
     nxt = np.minimum(index + 1, end_ring[ring_curve])
@@ -279,6 +296,10 @@ def tessellate_curves(points, radii, offsets, *, smooth: bool = True, sides: int
     keep = np.einsum("ij,ij->i", cross, cross) > (1e-6 * edge ** 2) ** 2
     triangles = triangles[keep]
 
+    vertex_rings = np.concatenate([np.repeat(np.arange(n_rings), sides),
+                                   np.repeat(cap_rings, sides)])
     return Tubes(vertices.astype(np.float32), normals.astype(np.float32),
                  triangles.astype(np.int32), curve_ids[vertex_curves].astype(np.int32),
-                 skipped, notes)
+                 skipped, notes, intercept[vertex_rings].astype(np.float32),
+                 curve_length[vertex_curves].astype(np.float32),
+                 radius[vertex_rings].astype(np.float32))

@@ -23,6 +23,8 @@ Per-hit inputs (``inputs``, arrays over the N hits, float; all optional until a 
     from (the viewer for camera rays; Cycles' sd->wi); ``"backfacing"`` (N,) 1 where the ray
     hit the back of the face, else 0. ``"attr:<name>"`` a geometry attribute, (N,), (N, 2),
     (N, 3) or (N, 4) (Attribute also finds ``"uv:<name>"`` and ``"color:<name>"``).
+    ``"hair"`` (N, 4) on hair (Curves Info): intercept, curve length [m], thickness (twice
+    the radius) [m] and Cycles' random per curve (hash_uint2_to_float(curve, 0)); zeros off hair.
     ``"tangent:<uvmap>"`` (N, 4) (``"tangent"`` for the active UV map): the interpolated,
     unnormalised object-space MikkTSpace tangent and, in the last column, the bitangent sign;
     ``"normal_matrix"`` (N, 3, 3) object-to-world matrix for normals (inverse transpose of the
@@ -784,7 +786,8 @@ SUPPORTED = frozenset({
     "ShaderNodeTexImage", "ShaderNodeTexNoise", "ShaderNodeTexVoronoi", "ShaderNodeTexWave",
     "ShaderNodeFresnel", "ShaderNodeLayerWeight", "ShaderNodeNewGeometry",
     "ShaderNodeAttribute", "ShaderNodeLightPath", "ShaderNodeRGBCurve",
-    "ShaderNodeVectorCurve", "ShaderNodeFloatCurve", "ShaderNodeNormalMap", "ShaderNodeBump"})
+    "ShaderNodeVectorCurve", "ShaderNodeFloatCurve", "ShaderNodeNormalMap", "ShaderNodeBump",
+    "ShaderNodeHairInfo"})
 
 
 class ShiftedInputs(Mapping):
@@ -1297,6 +1300,15 @@ def _geometry(ev, node):
     return out
 
 
+def _hair_info(ev, node):
+    """Cycles' Curves Info (``ShaderNodeHairInfo``) from the per-hit ``"hair"`` input
+    (intercept, length [m], thickness [m], random; zeros off hair: Is Strand 0, as Cycles on
+    a mesh). Tangent Normal is not given (reported as an unsupported output)."""
+    a = ev.hit("hair", node)
+    return {"Is Strand": (a[:, 1] > 0).astype(float), "Intercept": a[:, 0],
+            "Length": a[:, 1], "Thickness": a[:, 2], "Random": a[:, 3]}
+
+
 def _attribute(ev, node):
     p = node.props
     if p.get("attribute_type", "GEOMETRY") != "GEOMETRY":
@@ -1476,6 +1488,7 @@ _NODE_FUNCS = {
     "ShaderNodeTexVoronoi": _tex_voronoi, "ShaderNodeTexWave": _tex_wave,
     "ShaderNodeFresnel": _fresnel, "ShaderNodeLayerWeight": _layer_weight,
     "ShaderNodeNewGeometry": _geometry, "ShaderNodeAttribute": _attribute,
+    "ShaderNodeHairInfo": _hair_info,
     "ShaderNodeLightPath": _light_path, "ShaderNodeRGBCurve": _rgb_curves,
     "ShaderNodeVectorCurve": _vector_curves, "ShaderNodeFloatCurve": _float_curve,
     "ShaderNodeNormalMap": _normal_map, "ShaderNodeBump": _bump,

@@ -157,6 +157,7 @@ from ..settings import RenderSettings
 from . import compat
 from .. import hair
 from .. import nodes
+from .. import procedural
 from .. import textures
 from .world_export import (CAMERA_RAY, LIGHTING_RAY, constant_for_ray, decided_socket,
                            decided_source, environment_of, graph_maker, light_path_outputs)
@@ -316,6 +317,23 @@ def curve_shape(scene) -> str:
     return str(getattr(settings, "shape", "THICK")) if settings is not None else "THICK"
 
 
+def _hair_data(tubes, curve_numbers) -> _MeshData:
+    """Tubes (``engine/hair.py``) as mesh data: one corner per vertex, every triangle in the
+    first slot, flagged as strands, with Curves Info per corner (``attributes["hair"]``:
+    intercept, length, thickness = 2 x radius, Cycles' random of the curve's number in
+    ``curve_numbers`` (per vertex))."""
+    tri_verts = tubes.triangles.reshape(-1).astype(np.int32)
+    random = procedural.hash_uint2(np.asarray(curve_numbers, np.int64), 0).astype(np.float64) \
+        / float(0xFFFFFFFF)
+    info = np.stack([tubes.vertex_intercept, tubes.vertex_length, 2.0 * tubes.vertex_radius,
+                     random], axis=1).astype(np.float32)
+    data = _MeshData(tubes.vertices, tri_verts, tri_verts, tubes.normals,
+                     np.zeros(len(tubes.triangles), np.int32), tri_verts, {}, "", None,
+                     strands=True)
+    data.attributes["hair"] = info[tri_verts].reshape(-1, 3, 4)
+    return data
+
+
 def _read_curves(curves, shape: str, warn, owner: str) -> _MeshData | None:
     """A Curves object's curves as tubes of triangles (``engine/hair.py``), read as Cycles
     reads them (``sync_hair``): the control points themselves, the ``radius`` attribute or
@@ -348,19 +366,16 @@ def _read_curves(curves, shape: str, warn, owner: str) -> _MeshData | None:
         warn(f"{owner}: Cycles' Rounded Ribbons are rendered as 3D curves (round tubes)")
     if len(tubes.triangles) == 0:
         return None
-    n_tri = len(tubes.triangles)
-    tri_verts = tubes.triangles.reshape(-1).astype(np.int32)
-    uv_maps, active = {}, ""
+    data = _hair_data(tubes, tubes.vertex_curves)
     for attr in curves.attributes:
         if attr.domain == "CURVE" and attr.data_type == "FLOAT2" \
                 and not attr.name.startswith("."):
             uv = np.empty(n_curves * 2, np.float32)
             attr.data.foreach_get("vector", uv)
-            uv_maps[attr.name] = uv.reshape(-1, 2)[tubes.vertex_curves]
-            active = attr.name
+            data.uv_maps[attr.name] = uv.reshape(-1, 2)[tubes.vertex_curves]
+            data.active_uv = attr.name
             break
-    return _MeshData(tubes.vertices, tri_verts, tri_verts, tubes.normals,
-                     np.zeros(n_tri, np.int32), tri_verts, uv_maps, active, None, strands=True)
+    return data
 
 
 def _read_tangents(mesh, data: _MeshData, warn, owner: str) -> dict:
@@ -552,7 +567,7 @@ def _corner_attribute(data: _MeshData, key: str) -> np.ndarray:
         size = np.where(np.abs(size) > 1e-12, size, 1.0)
         generated = (co - (location - size)) / (2.0 * size)
         return generated[data.tri_verts].astype(np.float32).reshape(n_tri, 3, 3)
-    if key.startswith(("color", "attr:")):
+    if key.startswith(("color", "attr:")) or key == "hair":
         attribute = data.attributes.get(key)
         return attribute if attribute is not None else np.zeros((n_tri, 3, 4), np.float32)
     if key.startswith("tangent"):
@@ -633,7 +648,7 @@ _PARAM_SOCKETS = {
     "translucent": {"color": [("Color",)]},
     "sheen": {"color": [("Color",)], "roughness": [("Roughness",)]},
 }
-_COORDINATE_KEYS = ("uv", "position", "normal", "generated", "color", "attr")
+_COORDINATE_KEYS = ("uv", "position", "normal", "generated", "color", "attr", "hair")
 # What a shading normal's nodes (Normal Map) may read besides those: the per-corner MikkTSpace
 # tangents, the per-triangle normal matrix, and the camera hit's own world-space values
 # (``nodes`` module docstring), which the integrator hands over (``bsdf.MaterialTable``).
@@ -674,7 +689,7 @@ class _CoordinateRecorder(dict):
             return np.eye(3)[None]
         if key.startswith("tangent"):
             return np.array([[1.0, 0.0, 0.0, 1.0]])
-        if key.startswith(("color", "attr")):
+        if key.startswith(("color", "attr", "hair")):
             return np.zeros((1, 4))
         return np.zeros((1, 2) if key.startswith("uv") else (1, 3))
 
@@ -1615,10 +1630,7 @@ def _read_particle_hair(obj, index: int, render: bool, warn) -> tuple:
         warn(f"{owner}: {note}")
     if len(tubes.triangles) == 0:
         return None, slot
-    tri_verts = tubes.triangles.reshape(-1).astype(np.int32)
-    return _MeshData(tubes.vertices, tri_verts, tri_verts, tubes.normals,
-                     np.zeros(len(tubes.triangles), np.int32), tri_verts, {}, "", None,
-                     strands=True), slot
+    return _hair_data(tubes, tubes.vertex_curves), slot
 
 
 def _panorama(data, name: str) -> dict | None:
@@ -1937,7 +1949,7 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
             strands[start:end] = data.strands
             start = end
 
-    width = {"uv": 2, "tangent": 4, "color": 4, "attr": 4}
+    width = {"uv": 2, "tangent": 4, "color": 4, "attr": 4, "hair": 4}
     corner_attributes = {key: np.zeros((total, 3, width.get(key.split(":")[0], 3)), np.float32)
                          for key in sorted(_coordinates_read(materials))}
     start = 0
