@@ -29,8 +29,8 @@ Parameters and units
                 part's turn (between the spline's tangents at its ends and its chord) under
                 this; straight pieces are not cut.
     ``max_triangles`` (default :data:`MAX_TRIANGLES` = 16 million): where the tubes would
-                need more, pieces are not cut and then fewer sides are used (at least 3), and
-                :attr:`Tubes.notes` says so.
+                need more, pieces are not cut and then fewer sides are used (at least 3);
+                beyond that, one curve in k is drawn; :attr:`Tubes.notes` says so.
 
     Rings are framed by parallel transport (Bishop 1975: each ring's frame is the last one's
     with the new tangent's component removed), so tubes do not twist where a fixed reference
@@ -137,6 +137,13 @@ def tessellate_curves(points, radii, offsets, *, smooth: bool = True, sides: int
     curve_ids = np.flatnonzero(drawn)
     if len(curve_ids) == 0:
         return _empty(skipped, notes)
+    # Beyond the budget even with MIN_SIDES and no cuts: every k-th curve alone, said.
+    least = int(np.sum(2 * MIN_SIDES * (counts[curve_ids] - 1) + 2 * (MIN_SIDES - 2)))
+    if least > max_triangles:
+        step = -(-least // max(int(max_triangles), 1))
+        notes.append(f"{len(curve_ids[::step]):,} of {len(curve_ids):,} curves drawn (one in "
+                     f"{step}): too many triangles")
+        curve_ids = curve_ids[::step]
     counts = counts[curve_ids]
     first = offsets[:-1][curve_ids]
     last = first + counts - 1

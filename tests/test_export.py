@@ -314,6 +314,18 @@ def test_particle_hair_renders_as_tubes_as_cycles_reads_it():
         near_root = np.linalg.norm(corners - root, axis=1)
         assert near_root.min() == pytest.approx(0.01 * widen, rel=1e-3)     # the root's ring
         assert np.linalg.norm(corners - tip, axis=1).min() < 1e-6            # closed at the tip
+    # Beyond MAX_PARTICLE_KEYS keys one strand in k is read, and said.
+    from lanterna.engine.blender import export as export_module
+    limit = export_module.MAX_PARTICLE_KEYS
+    export_module.MAX_PARTICLE_KEYS = 20                      # 10 strands x 5 keys: 1 in 3
+    try:
+        fewer = export()
+    finally:
+        export_module.MAX_PARTICLE_KEYS = limit
+    said = [w for w in fewer.warnings if "one strand in 3 is drawn" in w]
+    assert len(said) == 1 and "'Furry'" in said[0]
+    hair_tris = np.sum(fewer.object_ids == fewer.object_names.index("Furry")) - 12
+    assert hair_tris == pytest.approx(np.sum(fur) * 4 / 10, rel=0.05)
     modifier.show_viewport = False
     assert np.sum(export().object_ids == s.object_names.index("Furry")) == 12
 

@@ -345,3 +345,14 @@ def test_a_saved_map_of_the_same_triangles_without_hair_is_not_reused():
     plain = dataclasses.replace(scene, strands=None)
     assert scene_parts(scene)["geometry"] != scene_parts(plain)["geometry"]
     assert scene_parts(scene)["materials"] == scene_parts(plain)["materials"]
+
+
+def test_beyond_the_budget_one_curve_in_k_is_drawn_and_said():
+    points = np.stack([np.repeat(np.arange(100.0), 2), np.zeros(200), np.tile([0.0, 1.0], 100)], 1)
+    least = 100 * (2 * 3 + 2 * 1)                  # three sides, one piece, two caps each
+    tubes = hair.tessellate_curves(points, np.full(200, 0.01), np.arange(0, 201, 2),
+                                   max_triangles=least // 4)
+    assert len(tubes.triangles) <= least // 4
+    assert np.unique(tubes.vertex_curves).tolist() == list(range(0, 100, 4))
+    assert any("25 of 100 curves drawn (one in 4)" in n for n in tubes.notes)
+

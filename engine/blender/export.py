@@ -175,6 +175,7 @@ COLLIMATED_SPREAD = 1e-3            # rad: below this an area light's Spread cou
 DEFAULT_DIFFUSE = 0.8
 _LUMA = np.array([0.2126, 0.7152, 0.0722])   # colour -> float conversion of a linked socket
 CURVE_TYPE_POLY = 1                 # Blender's curve_type attribute value of a poly curve
+MAX_PARTICLE_KEYS = 2_000_000       # particle hair keys read (co_hair: about 1 us a key)
 
 
 def _as_colour(v) -> np.ndarray:
@@ -1602,12 +1603,18 @@ def _read_particle_hair(obj, index: int, render: bool, warn) -> tuple:
     slot = max(int(settings.material) - 1, 0)
     if count == 0:
         return None, slot
-    points = np.empty((count, keys, 3))
+    owner = f"Object '{obj.name}', particle hair '{system.name}'"
+    step = -(-count * keys // MAX_PARTICLE_KEYS)    # one strand in ``step`` beyond the cap
+    if step > 1:
+        warn(f"{owner}: {count:,} strands of {keys} keys are more than Lanterna reads "
+             f"({MAX_PARTICLE_KEYS:,} keys); one strand in {step} is drawn")
+    numbers = np.arange(0, count, step)
+    points = np.empty((len(numbers), keys, 3))
     co_hair = system.co_hair
-    for i in range(count):                     # one call per key: Blender has no bulk read
-        row = points[i]
+    for row, i in zip(points, numbers):        # one call per key: Blender has no bulk read
         for k in range(keys):
-            row[k] = co_hair(obj, particle_no=first + i, step=k)
+            row[k] = co_hair(obj, particle_no=first + int(i), step=k)
+    count = len(numbers)
     length = np.concatenate([np.zeros((count, 1)), np.cumsum(
         np.linalg.norm(np.diff(points, axis=1), axis=2), axis=1)], axis=1)
     time_ = np.divide(length, length[:, -1:], out=np.zeros_like(length),
@@ -1625,12 +1632,11 @@ def _read_particle_hair(obj, index: int, render: bool, warn) -> tuple:
         radius[:, -1] = 0.0
     tubes = hair.tessellate_curves(points.reshape(-1, 3), radius.reshape(-1),
                                    np.arange(0, count * keys + 1, keys))
-    owner = f"Object '{obj.name}', particle hair '{system.name}'"
     for note in tubes.notes:
         warn(f"{owner}: {note}")
     if len(tubes.triangles) == 0:
         return None, slot
-    return _hair_data(tubes, tubes.vertex_curves), slot
+    return _hair_data(tubes, numbers[tubes.vertex_curves]), slot
 
 
 def _panorama(data, name: str) -> dict | None:
