@@ -242,10 +242,9 @@ class StrandEstimates:
                                     axis=1)
         count = int(min(max(AREA_POINTS * on.sum(), 10 * AREA_NEIGHBOURS), MAX_AREA_POINTS))
         pick = rng.choice(len(tri), size=count, p=area / area.sum())
-        u = rng.random((count, 2))
-        root = np.sqrt(u[:, 0])
-        points = (tri[pick, 0] * (1 - root)[:, None] + tri[pick, 1] * (root * (1 - u[:, 1]))[:, None]
-                  + tri[pick, 2] * (root * u[:, 1])[:, None])
+        bary = sampling.square_to_triangle(rng.random((count, 2)))
+        alpha, beta = bary[:, :1], bary[:, 1:]
+        points = alpha * tri[pick, 0] + (1.0 - alpha - beta) * tri[pick, 1] + beta * tri[pick, 2]
         unit = area.sum() / count
         area_tree = KDTree(points.astype(np.float32), leafsize=16)
         strand_photons = np.flatnonzero(on)

@@ -48,6 +48,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import sampling
+
 DEFAULT_RADIUS = 0.005        # m: Cycles' radius for curves without a radius attribute
 SIDES = 6
 MAX_TURN = math.radians(5.0)
@@ -87,11 +89,8 @@ def _unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _perpendicular(t: np.ndarray) -> np.ndarray:
-    """A unit vector perpendicular to each unit row of ``t`` (Duff et al. 2017's basis)."""
-    sign = np.where(t[:, 2] >= 0, 1.0, -1.0)
-    a = -1.0 / (sign + t[:, 2])
-    b = t[:, 0] * t[:, 1] * a
-    return np.stack([1.0 + sign * t[:, 0] ** 2 * a, sign * b, -sign * t[:, 0]], axis=1)
+    """A unit vector perpendicular to each unit row of ``t`` (``sampling``'s basis)."""
+    return sampling.orthonormal_basis(t)[0]
 
 
 def _spline(p0, p1, p2, p3, t):

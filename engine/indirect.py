@@ -170,6 +170,10 @@ class CachedIndirect:
         self.use_gradients = use_gradients
         self.camera = camera
         self.channels = gather.channels
+        # Hair samples' own gathers (``_with_strands``): M/4 x N/4 rays.
+        self.strand_gather = copy.copy(gather)
+        self.strand_gather.m = max(1, gather.m // STRAND_GATHER_DIVISOR)
+        self.strand_gather.n = max(4, gather.n // STRAND_GATHER_DIVISOR)
 
     def surface_irradiance(self, x, n):
         """As ``FinalGather.surface_irradiance``."""
@@ -205,10 +209,8 @@ class CachedIndirect:
         if plain.any():
             e[plain] = self.irradiance(x[plain], ns[plain], ng[plain], rng, stats)
             covered[plain] = stats.pop("covered_mask")
-        gather = copy.copy(self.gather)
-        gather.m = max(1, gather.m // STRAND_GATHER_DIVISOR)
-        gather.n = max(4, gather.n // STRAND_GATHER_DIVISOR)
-        e[strands] = gather.irradiance(x[strands], ns[strands], ng[strands], rng, stats)
+        e[strands] = self.strand_gather.irradiance(x[strands], ns[strands], ng[strands], rng,
+                                                   stats)
         stats["strand_gathered"] = stats.get("strand_gathered", 0) + int(strands.sum())
         stats["covered_mask"] = covered
         return e

@@ -633,7 +633,6 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera, subset=
                 ask = _asking(ask, rays[ask], spp, first_lookup, photon.lookups)
             if len(ask):
                 t0 = time.perf_counter()
-                strands = context.scene.strands
                 e = photon.irradiance(x[ask], ns_smooth[ask], ng[ask], rng, stats,
                                       strands=None if strands is None else strands[prim[ask]])
                 stats["estimate_seconds"] += time.perf_counter() - t0
