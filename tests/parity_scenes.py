@@ -46,6 +46,9 @@ through an equirectangular camera. ``CAMERA_SCENES``
 holds ``bokeh``, two out-of-focus emitters in frame whose images are the lens's shape,
 compared through ``bokeh_moments`` rather than block means, and ``lights_in_frame``, lights
 the camera sees (one of them with Visibility > Camera off), compared by the block rule.
+``GEOMETRY_SCENES`` holds ``hair`` (Curves objects: a tuft of Catmull-Rom strands and a few
+poly ones under the sun), compared by the block rule and 4 x 4-pixel blocks; ``fur_ball``
+(20,000 strands, 160 x 120) is ``lanterna bench --hair``'s scene, with no stored reference.
 
 Only ``bpy``, ``mathutils`` and numpy: no import of Lanterna, so the reference script can use
 it without the add-on.
