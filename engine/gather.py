@@ -257,6 +257,7 @@ class StrandEstimates:
                                     .astype(np.int64)]]
         base = np.zeros((wanted, 3))
         slope = np.zeros((wanted, 3, 3))
+        full = 0                        # spheres that held MAX_SPHERE_PHOTONS (undercounted)
         for a in range(0, wanted, ESTIMATE_CHUNK):
             b = min(a + ESTIMATE_CHUNK, wanted)
             d_area, _ = area_tree.query(at[a:b], k=AREA_NEIGHBOURS)
@@ -266,6 +267,7 @@ class StrandEstimates:
             idx = np.asarray(idx).reshape(b - a, -1)
             inside = (idx < len(strand_photons)) & (np.asarray(d_ph).reshape(b - a, -1)
                                                     <= radius[:, None])
+            full += int(np.count_nonzero(inside[:, -1]))
             inside[:, 0] = False        # the estimate's own photon: +1/32 on average else
             flat = np.where(inside, idx, 0)
             weight = inside.astype(np.float64)
@@ -278,7 +280,8 @@ class StrandEstimates:
         out = cls(at.astype(np.float32), base.astype(np.float32), slope.astype(np.float32))
         out._tree = KDTree(out.positions, leafsize=16)
         out.stats = {"strand_estimates": wanted, "strand_photons": int(len(strand_photons)),
-                     "area_points": count, "seconds": time.perf_counter() - t0}
+                     "area_points": count, "full_spheres": full,
+                     "seconds": time.perf_counter() - t0}
         return out
 
     def lookup(self, points: np.ndarray, normals: np.ndarray) -> np.ndarray:

@@ -304,6 +304,7 @@ def test_strand_estimates_divide_the_flux_on_strands_by_their_area_and_keep_its_
     est = StrandEstimates.build(pmap, Accelerator(tris.astype(np.float32)), tris,
                                 np.ones(len(tris), bool))
     assert len(est) == n // 4 and est.stats["strand_photons"] == n
+    assert est.stats["full_spheres"] == 0
     np.testing.assert_allclose(est.base.mean(axis=0), flux_density, rtol=0.02)
     np.testing.assert_allclose(est.slope.mean(axis=0)[:, 2], 2 * flux_density, rtol=0.05)
     assert np.abs(est.slope.mean(axis=0)[:, :2]).max() < 0.05 * flux_density

@@ -1566,9 +1566,9 @@ def _report_visibility(obj, warn) -> None:
             warn(f"Object '{name}': {label} is not supported; rendered as an ordinary object")
 
 
-def _particle_hair(obj, depsgraph):
-    """The hair particle systems of ``obj`` that Cycles draws (Hair, rendered as Path, its
-    modifier on for this depsgraph): [(system index, settings), ...]."""
+def _particle_hair(obj, depsgraph) -> list:
+    """The indices of the hair particle systems of ``obj`` that Cycles draws (Hair, rendered
+    as Path, its modifier on for this depsgraph)."""
     render = getattr(depsgraph, "mode", "RENDER") == "RENDER"
     out = []
     for index, system in enumerate(getattr(obj, "particle_systems", ())):
@@ -1580,7 +1580,7 @@ def _particle_hair(obj, depsgraph):
         if modifier is not None and not (modifier.show_render if render
                                          else modifier.show_viewport):
             continue
-        out.append((index, settings))
+        out.append(index)
     return out
 
 
@@ -1860,7 +1860,7 @@ def export_scene(depsgraph, *, resolution=None, border=None) -> Scene:
         elif otype == "MESH":
             _report_visibility(obj, warn)
             if not inst.is_instance:
-                for index, _settings in _particle_hair(obj, depsgraph):
+                for index in _particle_hair(obj, depsgraph):
                     key = ("particles", obj.original.as_pointer(), index)
                     if key not in mesh_cache:
                         mesh_cache[key], slot = _read_particle_hair(
