@@ -133,24 +133,30 @@ def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.
         else:
             u2 = sampling.stratified_2d(count, k, rng)                 # (N, K, 2)
             u_pick = (np.argsort(rng.random((count, k)), axis=1) + rng.random((count, k))) / k
-        probs = lights.selection_weights(x, n)                          # (N, L)
-        cdf = np.cumsum(probs, axis=1)
-        choice = np.minimum((cdf[:, None, :] < u_pick[..., None]).sum(axis=2), len(lights.sampled) - 1)
         point_of = np.repeat(np.arange(count), k)
-        choice = choice.reshape(-1)
         u2 = u2.reshape(-1, 2)
-        p_sel = probs[point_of, choice]
-        # What is left of each sample's choice number inside its light's interval, uniform
-        # in [0, 1) and stratified over the point's samples of that light: an image world
-        # picks its strategy and cell with it (``EnvironmentLight.sample_rgb``).
         u_pick = u_pick.reshape(-1)
-        below = np.where(choice > 0, cdf[point_of, np.maximum(choice - 1, 0)], 0.0)
-        rest = np.clip((u_pick - below) / np.maximum(p_sel, 1e-300), 0.0, 1.0 - 1e-12)
+        if len(lights.sampled) == 1:
+            # One sampled light takes every sample, its choice number whole.
+            choice = None
+            p_sel = np.ones(len(point_of))
+            rest = np.clip(u_pick, 0.0, 1.0 - 1e-12)
+        else:
+            probs = lights.selection_weights(x, n)                      # (N, L)
+            cdf = np.cumsum(probs, axis=1)
+            choice = np.minimum((cdf[:, None, :] < u_pick.reshape(count, k)[..., None])
+                                .sum(axis=2), len(lights.sampled) - 1).reshape(-1)
+            p_sel = probs[point_of, choice]
+            # What is left of each sample's choice number inside its light's interval,
+            # uniform in [0, 1) and stratified over the point's samples of that light: an
+            # image world picks its strategy and cell with it (``EnvironmentLight.sample_rgb``).
+            below = np.where(choice > 0, cdf[point_of, np.maximum(choice - 1, 0)], 0.0)
+            rest = np.clip((u_pick - below) / np.maximum(p_sel, 1e-300), 0.0, 1.0 - 1e-12)
         for li, light in enumerate(lights.sampled):
-            sel = np.nonzero(choice == li)[0]
-            if len(sel) == 0:
-                continue
+            sel = slice(None) if choice is None else np.nonzero(choice == li)[0]
             pts = point_of[sel]
+            if len(pts) == 0:
+                continue
             if getattr(light, "per_sample_rgb", False):
                 # An image world: each sample has its own radiance (lights.EnvironmentLight).
                 w, dist, weight, rgb = light.sample_rgb(x[pts], n[pts], u2[sel], rest[sel])

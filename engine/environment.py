@@ -90,6 +90,9 @@ PATCH_FLOOR = 0.02   # a patch's density: its bilinear surface + this x its mean
 # image's weight.
 BRIGHT_DENSITY = 10.0
 BRIGHT_MIN_POWER = 0.25
+# A table of at most this many patches keeps what sampling reads of each by rank
+# (``PatchTable.by_rank``): a sun's few patches, sampled at every light sample of a render.
+RANKED_PATCHES = 1 << 16
 
 
 def _cubic_weights(t):
@@ -320,7 +323,35 @@ class Environment:
         power = float(self.table.share[bright].sum())
         self.bright = PatchTable(np.where(bright, f, 0.0)) if power >= BRIGHT_MIN_POWER else None
         self.bright_power = power if self.bright is not None else 0.0   # its share of weight
+        for table in (self.table, self.bright):
+            if table is not None and table.count <= RANKED_PATCHES:
+                table.by_rank = self.rank_patches(table)
 
+    def rank_patches(self, table: "PatchTable") -> dict:
+        """What ``sample`` reads of each of ``table``'s patches of weight > 0, by rank:
+        ``row``, ``col`` (int64), ``density`` (share x W x H), ``knots`` four (count,) arrays:
+        the floored knots k00, k10, k01, k11, and for an equirectangular Linear or Closest
+        image ``texels`` [channel][corner] (count,) arrays: the texels at the patch's corners
+        k00, k10, k01, k11 (Linear: the image inside the patch is their bilinear blend at the
+        sample's (s, t), the look-up's own arithmetic; Closest: the patch is its one texel),
+        before decoding."""
+        h, w = self.grid
+        row, col = np.divmod(table.order[:table.count].astype(np.int64), w)
+        # One contiguous 1-D array per corner (and per channel): ``np.take`` of a 1-D array
+        # by rank is several times faster than fancy indexing of an (n, 4, 3) array.
+        out = {"row": row, "col": col, "density": table.share[row, col] * (w * h),
+               "knots": [np.ascontiguousarray(k) for k in self._corners(row, col)]}
+        if self.projection == "EQUIRECTANGULAR" and self.interpolation in ("Linear",
+                                                                           "Closest"):
+            ph, pw = self.pixels.shape[:2]
+            if self.flat:
+                corner = [(row, col)]
+            else:
+                r1, c1 = (row + 1) % ph, (col + 1) % pw
+                corner = [(row, col), (row, c1), (r1, col), (r1, c1)]
+            out["texels"] = [[np.ascontiguousarray(self.pixels[r, c, ch], np.float64)
+                              for r, c in corner] for ch in range(3)]
+        return out
     def _corners(self, row, col):
         """The four floored knots (k00, k10, k01, k11) of patches (row, col): (i, j),
         (i, j + 1), (i + 1, j), (i + 1, j + 1), wrapping."""
@@ -346,23 +377,38 @@ class Environment:
         from the patch's bilinear surface (pbrt-v4's ``SampleBilinear``: t from the
         marginal's linear density, then s given t). ``rank``: ``table.rank(u_patch)`` where
         the caller has it already."""
+        uu, vv, density, _ = self._sample_patch(u_patch, u, table, rank)
+        return uu, vv, density
+
+    def _sample_patch(self, u_patch, u, table, rank):
+        """``sample_uv``'s (u, v) and density, with the patches' ranks and local (s, t) for
+        ``sample``'s look-up: (u, v, density, (rank, s, t))."""
         h, w = self.grid
         table = self.table if table is None else table
         u = np.clip(np.asarray(u, np.float64).reshape(-1, 2), 0.0, 1.0 - 1e-12)
         rank = table.rank(u_patch) if rank is None else rank
-        row, col = np.divmod(table.order[rank].astype(np.int64), w)
-        density = table.share[row, col] * (w * h)
+        ranked = table.by_rank
+        if ranked is not None:
+            row, col = ranked["row"][rank], ranked["col"][rank]
+            density = ranked["density"][rank]
+        else:
+            row, col = np.divmod(table.order[rank].astype(np.int64), w)
+            density = table.share[row, col] * (w * h)
         if self.flat:
             s, t = u[:, 0], u[:, 1]
         else:
-            corners = self._corners(row, col)
+            if ranked is not None:
+                corners = tuple(np.take(k, rank) for k in ranked["knots"])
+            else:
+                corners = self._corners(row, col)
             k00, k10, k01, k11 = corners
             t = _sample_linear(u[:, 1], k00 + k10, k01 + k11)
             s = _sample_linear(u[:, 0], k00 + (k01 - k00) * t, k10 + (k11 - k10) * t)
             density = density * self._over_mean(corners, s, t)
         # The top row's upper half lies past v = 1: Repeat wraps it to the south pole's cap.
         off = self.offset
-        return np.mod((col + off + s) / w, 1.0), np.mod((row + off + t) / h, 1.0), density
+        return (np.mod((col + off + s) / w, 1.0), np.mod((row + off + t) / h, 1.0), density,
+                (rank, s, t))
 
     def sample(self, u: np.ndarray, u_cell: np.ndarray | None = None,
                table: "PatchTable | None" = None):
@@ -379,14 +425,35 @@ class Environment:
             rank = table.rank(u_cell)
             lo, hi = table.cdf[rank], table.cdf[rank + 1]
             u = np.stack([(u_cell - lo) / np.where(hi > lo, hi - lo, 1.0), u[:, 1]], 1)
-        uu, vv, p_uv = self.sample_uv(u_cell, u, table, rank)
-        tex = equirectangular_to_direction(uu, vv)
-        sin_t = np.sin(np.pi * vv)
+        uu, vv, p_uv, (rank, s, t) = self._sample_patch(u_cell, u, table, rank)
+        phi = np.pi - 2.0 * np.pi * uu            # equirectangular_to_direction, sin kept
+        theta = np.pi * (1.0 - vv)
+        sin_t = np.sin(theta)
+        tex = np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), np.cos(theta)], axis=1)
         pdf = np.where(sin_t > 0, p_uv / (2.0 * np.pi ** 2 * np.maximum(sin_t, 1e-300)), 0.0)
         wi = tex @ self.rotation                 # texture -> world (rotation transposed)
-        if self.projection == "EQUIRECTANGULAR":  # the image at the sampled (u, v) itself
+        if self.projection != "EQUIRECTANGULAR":
+            return wi, self.radiance(wi), pdf
+        ranked = table.by_rank
+        if ranked is None or "texels" not in ranked:   # the image at the sampled (u, v)
             return wi, self.lookup_uv(uu, vv) * self.strength, pdf
-        return wi, self.radiance(wi), pdf
+        # The same value from the patch's own corner texels (rank_patches).
+        value = np.empty((len(rank), 3))
+        if self.flat:
+            for ch, (texel,) in enumerate(ranked["texels"]):
+                value[:, ch] = np.take(texel, rank)
+        else:
+            weights = ((1.0 - s) * (1.0 - t), s * (1.0 - t), (1.0 - s) * t, s * t)
+            for ch, texels in enumerate(ranked["texels"]):
+                acc = weights[0] * np.take(texels[0], rank)
+                for weight, texel in zip(weights[1:], texels[1:]):
+                    acc += weight * np.take(texel, rank)
+                value[:, ch] = acc
+        if self.pixels.dtype == np.uint8:
+            value = value / 255.0
+        if self.encoding == "srgb":
+            value = srgb_to_linear(value)
+        return wi, value * self.strength, pdf
 
     def _patch_of(self, wi: np.ndarray):
         """The patches (row, col) that unit world directions ``wi`` (N, 3) fall in, their
@@ -458,11 +525,23 @@ class Environment:
                    + self.table.nbytes + (self.bright.nbytes if self.bright else 0))
 
 
+def _nbytes(arrays) -> int:
+    """Bytes of the arrays in (nested) lists."""
+    if isinstance(arrays, np.ndarray):
+        return int(arrays.nbytes)
+    return sum(_nbytes(a) for a in arrays)
+
+
 class PatchTable:
     """Patches sorted by weight, brightest first, in one 1-D table: ``share`` (H, W) each
     patch's probability, ``order`` the flat patch indices by falling weight, ``cdf`` their
     running sum (from 0 to 1), ``count`` the patches of weight > 0 (at least 1), from
-    weights ``f`` (H, W) >= 0 with a positive sum."""
+    weights ``f`` (H, W) >= 0 with a positive sum.
+
+    ``by_rank``: for a table of at most ``RANKED_PATCHES`` patches of weight > 0 (a sun's
+    table), what ``Environment.sample`` reads of each, by rank: its row and column, its
+    density in (u, v), its four floored knots and its four corner texels
+    (``Environment.rank_patches``); None for larger tables, which look them up per sample."""
 
     def __init__(self, f: np.ndarray):
         total = f.sum()
@@ -471,6 +550,7 @@ class PatchTable:
         self.order = np.argsort(-flat_f, kind="stable").astype(np.int32)
         self.cdf = np.concatenate([[0.0], np.cumsum(flat_f[self.order]) / total])
         self.count = max(1, int(np.count_nonzero(flat_f > 0)))
+        self.by_rank = None
 
     def rank(self, u_patch) -> np.ndarray:
         """The table rows (N,) that numbers ``u_patch`` (N,) in [0, 1) fall in."""
@@ -479,4 +559,5 @@ class PatchTable:
 
     @property
     def nbytes(self) -> int:
-        return int(self.share.nbytes + self.order.nbytes + self.cdf.nbytes)
+        ranked = 0 if self.by_rank is None else _nbytes(list(self.by_rank.values()))
+        return int(self.share.nbytes + self.order.nbytes + self.cdf.nbytes + ranked)

@@ -167,25 +167,47 @@ class RadianceEstimates:
         kk = int(min(LOOKUP_NEIGHBOURS, len(self)))
         pts32 = np.ascontiguousarray(points, np.float32)
         bounded = bool(np.isfinite(self.max_radius))
-        if bounded:
-            _dist, idx = self._tree.query(pts32, k=kk, distance_upper_bound=float(self.max_radius))
-        else:
-            _dist, idx = self._tree.query(pts32, k=kk)
-        idx = idx.reshape(len(points), kk).astype(np.int64)
-        found = idx < len(self)
-        idx = np.where(found, idx, 0)
+
+        def nearest(query_points, k):
+            if bounded:
+                _dist, found = self._tree.query(query_points, k=k,
+                                                distance_upper_bound=float(self.max_radius))
+            else:
+                _dist, found = self._tree.query(query_points, k=k)
+            return found.reshape(len(query_points), k).astype(np.int64)
+
         nrm = normals.astype(np.float32)
-        agree = found & (np.einsum("nkj,nj->nk", np.take(self.normals, idx.reshape(-1), axis=0)
-                                   .reshape(len(points), kk, 3), nrm) > 0.5)
-        if bounded:
-            offset = np.take(self.positions, idx.reshape(-1), axis=0).reshape(len(points), kk, 3)
-            offset -= pts32[:, None, :]
-            agree &= np.abs(np.einsum("nkj,nj->nk", offset, nrm)) <= DISC_THICKNESS * self.max_radius
-        first = np.argmax(agree, axis=1)
-        found = agree[np.arange(len(points)), first]
-        chosen = idx[np.arange(len(points)), first]
-        out[found] = np.take(self.irradiance, chosen[found], axis=0)
+        # The nearest estimate agrees for nearly every point: it is found and tested alone
+        # first, and only the rest look at their other neighbours (the same choice: the
+        # first that agrees, nearest first).
+        first_idx = nearest(pts32, 1)[:, 0]
+        agree = self._agrees(first_idx, pts32, nrm, bounded)
+        out[agree] = np.take(self.irradiance, first_idx[agree], axis=0)
+        rest = np.flatnonzero(~agree)
+        if len(rest) and kk > 1:
+            others = nearest(np.ascontiguousarray(pts32[rest]), kk)[:, 1:]
+            cols = others.shape[1]
+            ok = self._agrees(others.reshape(-1), np.repeat(pts32[rest], cols, axis=0),
+                              np.repeat(nrm[rest], cols, axis=0), bounded).reshape(-1, cols)
+            first = np.argmax(ok, axis=1)
+            rows = np.arange(len(rest))
+            found = ok[rows, first]
+            out[rest[found]] = np.take(self.irradiance, others[rows, first][found], axis=0)
         return out
+
+    def _agrees(self, idx, points32, normals32, bounded: bool) -> np.ndarray:
+        """(N,) bool: estimate ``idx`` (N,) exists (the tree's misses are ``len(self)``), its
+        normal agrees with ``normals32`` (n . n_i > 0.5) and, where ``bounded``, it lies
+        within ``DISC_THICKNESS`` x ``max_radius`` of the point's tangent plane."""
+        found = idx < len(self)
+        safe = np.where(found, idx, 0)
+        agree = found & (np.einsum("nj,nj->n", np.take(self.normals, safe, axis=0),
+                                   normals32) > 0.5)
+        if bounded:
+            offset = np.take(self.positions, safe, axis=0) - points32
+            agree &= np.abs(np.einsum("nj,nj->n", offset, normals32)) \
+                <= DISC_THICKNESS * self.max_radius
+        return agree
 
 
 @dataclass

@@ -1037,15 +1037,19 @@ class EnvironmentLight:
         cdf = cdf + (np.where(faces, PORTAL_SHARE, 0.0) - portal)
         return portal, cdf, 1.0 - portal - cdf
 
-    def solid_angle_pdf(self, points, normals, wi):
+    def solid_angle_pdf(self, points, normals, wi, env_pdf=None):
         """Density (N,) [1/sr] of this light's samples at ``points`` with ``normals`` giving
-        directions ``wi`` (the mixture of ``sample_rgb``)."""
+        directions ``wi`` (the mixture of ``sample_rgb``). ``env_pdf`` (N,): the image
+        table's own density of ``wi`` where the caller has it (``sample_rgb``: its CDF
+        samples bring it from ``Environment.sample``)."""
         x = np.asarray(points, np.float64).reshape(-1, 3)
         n = np.asarray(normals, np.float64).reshape(-1, 3)
         w = np.asarray(wi, np.float64).reshape(-1, 3)
         cos_pdf = np.maximum(_dot(n, w), 0.0) / np.pi
-        env_pdf = 0.0 if self.environment is None else \
-            self.environment.direction_pdf(w, self.table)
+        if self.environment is None:
+            env_pdf = 0.0
+        elif env_pdf is None:
+            env_pdf = self.environment.direction_pdf(w, self.table)
         sel, faces = self._portal_weights(x)
         if not faces.any():
             return self.cdf_share * env_pdf + (1.0 - self.cdf_share) * cos_pdf
@@ -1063,6 +1067,8 @@ class EnvironmentLight:
         count = len(x)
         x = np.asarray(x, np.float64)
         n64 = np.asarray(n, np.float64)
+        if self.cdf_share >= 1.0 and not len(self.portals) and self.environment is not None:
+            return self._sample_table_only(n64, u, pick)
         w = np.empty((count, 3))
         stratified = pick is not None
         pick = np.asarray(u[:, 0] if pick is None else pick, np.float64).copy()
@@ -1090,17 +1096,20 @@ class EnvironmentLight:
             d = p - x[idx]
             w[idx] = d / np.maximum(np.linalg.norm(d, axis=1), 1e-300)[:, None]
         rgb = np.zeros((count, 3))
+        env_pdf = None
         if env.any():
             idx = np.flatnonzero(env)
             if stratified:
-                w[idx], rgb[idx], _ = self.environment.sample(
+                w[idx], rgb[idx], p_env = self.environment.sample(
                     np.clip(u[idx], 0.0, 1.0 - 1e-12),
                     u_cell=np.clip(pick[idx] / split[idx], 0.0, 1.0 - 1e-12),
                     table=self.table)
             else:
                 uu = np.stack([pick[idx] / split[idx], u[idx, 1]], 1)
-                w[idx], rgb[idx], _ = self.environment.sample(np.clip(uu, 0.0, 1.0 - 1e-12),
-                                                              table=self.table)
+                w[idx], rgb[idx], p_env = self.environment.sample(
+                    np.clip(uu, 0.0, 1.0 - 1e-12), table=self.table)
+            env_pdf = np.empty(count)
+            env_pdf[idx] = p_env
         if cos.any():
             idx = np.flatnonzero(cos)
             if stratified:
@@ -1111,7 +1120,13 @@ class EnvironmentLight:
                                        1.0 - 1e-12), u[idx, 1]], 1)
             t, b = sampling.orthonormal_basis(n64[idx])
             w[idx] = sampling.to_world(sampling.square_to_cosine_hemisphere(uu), t, b, n64[idx])
-        pdf = self.solid_angle_pdf(x, n64, w)
+        if env_pdf is not None:
+            # The image's density of its own samples came with them; the other strategies'
+            # directions look it up.
+            rest_idx = np.flatnonzero(~env)
+            if len(rest_idx):
+                env_pdf[rest_idx] = self.environment.direction_pdf(w[rest_idx], self.table)
+        pdf = self.solid_angle_pdf(x, n64, w, env_pdf)
         cos_x = np.maximum(_dot(n64, w), 0.0)
         ok = (pdf > 0) & (cos_x > 0)
         weight = np.where(ok, cos_x / np.where(ok, pdf, 1.0), 0.0)
@@ -1121,6 +1136,23 @@ class EnvironmentLight:
         if len(look):
             rgb[look] = self.radiance(w[look])
         return w, np.full(count, np.inf), weight, rgb
+
+    def _sample_table_only(self, n64, u, pick):
+        """``sample_rgb`` where every sample comes from the image's table (the sky gathered,
+        no portal: ``gather_sky``): the mixture is the table's density alone, which its
+        samples bring with them."""
+        if pick is None:
+            w, rgb, pdf = self.environment.sample(np.clip(u, 0.0, 1.0 - 1e-12),
+                                                  table=self.table)
+        else:
+            w, rgb, pdf = self.environment.sample(
+                np.clip(u, 0.0, 1.0 - 1e-12), u_cell=np.clip(pick, 0.0, 1.0 - 1e-12),
+                table=self.table)
+        cos_x = np.maximum(_dot(n64, w), 0.0)
+        ok = (pdf > 0) & (cos_x > 0)
+        weight = np.where(ok, cos_x / np.where(ok, pdf, 1.0), 0.0)
+        rgb[~ok] = 0.0
+        return w, np.full(len(w), np.inf), weight, rgb
 
     def sample(self, x, n, u):
         """As the other lights: (directions, distances, weight) with the radiance's luminance

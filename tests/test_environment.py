@@ -99,6 +99,37 @@ def test_pdf_integrates_to_one_over_the_sphere(interpolation):
     assert abs(total - 1.0) < 2e-3, total
 
 
+@pytest.mark.parametrize("encoding", ["linear", "srgb"])
+@pytest.mark.parametrize("interpolation", INTERPOLATIONS)
+def test_ranked_tables_sample_as_the_per_sample_look_ups(interpolation, encoding):
+    """A small table keeps its patches' corners and texels by rank (``PatchTable.by_rank``):
+    its samples' directions, radiance and density are the ones the per-sample look-ups give
+    (the image read at each sample's own (u, v), ``lookup_uv``), for the table of all patches
+    and for the bright one."""
+    rng = np.random.default_rng(11)
+    img = rng.random((16, 32, 3)) ** 3
+    img[10:12, 20:22] = 300.0
+    if encoding == "srgb":
+        img = (np.clip(img, 0, 1) * 255).astype(np.uint8)
+        img[10:12, 20:22] = 255
+    else:
+        img = img.astype(np.float32)
+    env = Environment(img, encoding=encoding, rotation=euler_rotation(np.radians([10, 0, 40])),
+                      interpolation=interpolation, strength=(1.5, 1.0, 0.5))
+    u, u_cell = rng.random((4096, 2)), rng.random(4096)
+    for table in (env.table, env.bright):
+        if table is None:
+            continue
+        assert table.by_rank is not None
+        ranked = env.sample(u, u_cell=u_cell, table=table)
+        kept, table.by_rank = table.by_rank, None
+        plain = env.sample(u, u_cell=u_cell, table=table)
+        table.by_rank = kept
+        for a, b in zip(ranked, plain):
+            np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(ranked[1], env.radiance(ranked[0]), rtol=1e-6)
+
+
 @pytest.mark.parametrize("interpolation", INTERPOLATIONS)
 def test_samples_follow_the_pdf_chi_square(interpolation):
     rng = np.random.default_rng(5)
