@@ -159,9 +159,12 @@ def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.
                 continue
             if getattr(light, "per_sample_rgb", False):
                 # An image world: each sample has its own radiance (lights.EnvironmentLight).
-                w, dist, weight, rgb = light.sample_rgb(x[pts], n[pts], u2[sel], rest[sel])
+                w, dist, weight, rgb = light.sample_rgb(np.take(x, pts, axis=0),
+                                                        np.take(n, pts, axis=0),
+                                                        u2[sel], rest[sel])
             else:
-                (w, dist, weight), rgb = light.sample(x[pts], n[pts], u2[sel]), None
+                (w, dist, weight), rgb = light.sample(np.take(x, pts, axis=0),
+                                                      np.take(n, pts, axis=0), u2[sel]), None
             weight = weight / (p_sel[sel] * k)
             live = (weight > 0) & np.isfinite(weight)
             if shadow_map is not None and shadow_map.covers(li):
@@ -189,8 +192,8 @@ def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.
         target = np.concatenate([everyone if g[0] is None else g[0] for g in groups])
         dirs = np.concatenate([g[1] for g in groups]).astype(x.dtype, copy=False)
         dist = np.concatenate([g[2] for g in groups])
-        org = x[target]
-        normals = (n if offset_normals is None else offset_normals)[target]
+        org = np.take(x, target, axis=0)           # (take: row gathers at twice the speed)
+        normals = np.take(n if offset_normals is None else offset_normals, target, axis=0)
     eps = accel.offset_distance(org)
     start = accel.offset_origins(org, normals, dirs, eps=eps)
     finite = np.isfinite(dist)

@@ -420,9 +420,11 @@ def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfa
     lx, ly = sin_t * np.cos(phi), sin_t * np.sin(phi)
     t, b = sampling.orthonormal_basis(normals.astype(np.float64))
     nn = normals.astype(np.float64)
-    dirs = (lx[:, None] * t[point_of] + ly[:, None] * b[point_of] + cos_t[:, None] * nn[point_of])
-    origin_points = points.astype(np.float64)[point_of]
-    origin_normals = offset_normals.astype(np.float64)[point_of]
+    # Row gathers by np.take (twice the speed of fancy indexing).
+    dirs = (lx[:, None] * np.take(t, point_of, axis=0) + ly[:, None] * np.take(b, point_of, axis=0)
+            + cos_t[:, None] * np.take(nn, point_of, axis=0))
+    origin_points = np.take(points.astype(np.float64), point_of, axis=0)
+    origin_normals = np.take(offset_normals.astype(np.float64), point_of, axis=0)
     total_rays = len(stratum)
     radiance = np.zeros((total_rays, 3))
     # The sky the first rays see, in channels of its own when asked (``split_sky``).
@@ -455,7 +457,7 @@ def _final_gather_chunk(points, normals, offset_normals, estimates, accel, surfa
         if len(ray_of) == 0:
             break
         x = origins + tt[:, None].astype(np.float64) * dirs
-        ng = surfaces.geometric_normals[prim].astype(np.float64)
+        ng = np.take(surfaces.geometric_normals, prim, axis=0).astype(np.float64)
         facing = np.einsum("ij,ij->i", ng, dirs) > 0
         ng[facing] *= -1                                   # towards the gather ray
         surface = surfaces.params(prim, bu, bv, dirs, ray={
