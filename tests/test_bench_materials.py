@@ -118,4 +118,4 @@ def test_worlds_suite_check_at_256_and_its_own_section():
     assert materials.section_of(both) == materials.section_of(doc)
     with pytest.raises(materials.BenchError):
         materials.parse_args(["--worlds", "--scenes", "principled_room"])
-    assert materials.parse_args(["--worlds"]).scenes == ["yard", "window_room"]
+    assert materials.parse_args(["--worlds"]).scenes == ["yard_320", "yard", "window_room"]
