@@ -90,6 +90,8 @@ PATCH_FLOOR = 0.02   # a patch's density: its bilinear surface + this x its mean
 # image's weight.
 BRIGHT_DENSITY = 10.0
 BRIGHT_MIN_POWER = 0.25
+# A table's guide to its rows (``PatchTable.rank``): bins of [0, 1) (exact: a power of two).
+GUIDE_BINS = 1 << 16
 # A table of at most this many patches keeps what sampling reads of each by rank
 # (``PatchTable.by_rank``): a sun's few patches, sampled at every light sample of a render.
 RANKED_PATCHES = 1 << 16
@@ -551,13 +553,31 @@ class PatchTable:
         self.cdf = np.concatenate([[0.0], np.cumsum(flat_f[self.order]) / total])
         self.count = max(1, int(np.count_nonzero(flat_f > 0)))
         self.by_rank = None
+        # A guide over GUIDE_BINS equal bins of [0, 1): the rank at each bin's lower edge and
+        # at its upper one; a number in a bin whose two agree has that rank without a search
+        # (a sun's table: nearly every bin), the others search the CDF.
+        edges = np.arange(GUIDE_BINS + 1, dtype=np.float64) / GUIDE_BINS
+        at_edge = self._search(edges)
+        self.guide, self.guide_unique = at_edge[:-1], at_edge[:-1] == at_edge[1:]
+
+    def _search(self, u) -> np.ndarray:
+        return np.clip(np.searchsorted(self.cdf, u, side="right") - 1, 0,
+                       self.count - 1).astype(np.int64)
 
     def rank(self, u_patch) -> np.ndarray:
-        """The table rows (N,) that numbers ``u_patch`` (N,) in [0, 1) fall in."""
-        return np.clip(np.searchsorted(self.cdf, np.asarray(u_patch, np.float64),
-                                       side="right") - 1, 0, self.count - 1)
+        """The table rows (N,) that numbers ``u_patch`` (N,) in [0, 1) fall in: the largest
+        row whose running sum is at most the number (the guide's answer where its bin holds
+        one row, else a binary search: the same rows either way)."""
+        u = np.asarray(u_patch, np.float64)
+        bins = np.clip((u * GUIDE_BINS).astype(np.int64), 0, GUIDE_BINS - 1)
+        out = np.take(self.guide, bins)
+        search = np.flatnonzero(~np.take(self.guide_unique, bins))
+        if len(search):
+            out[search] = self._search(u[search])
+        return out
 
     @property
     def nbytes(self) -> int:
         ranked = 0 if self.by_rank is None else _nbytes(list(self.by_rank.values()))
-        return int(self.share.nbytes + self.order.nbytes + self.cdf.nbytes + ranked)
+        return int(self.share.nbytes + self.order.nbytes + self.cdf.nbytes + ranked
+                   + self.guide.nbytes + self.guide_unique.nbytes)

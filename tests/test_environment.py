@@ -99,6 +99,22 @@ def test_pdf_integrates_to_one_over_the_sphere(interpolation):
     assert abs(total - 1.0) < 2e-3, total
 
 
+def test_a_tables_guide_gives_the_rows_a_search_gives():
+    """``PatchTable.rank`` answers from its guide where a bin holds one row: the rows of a
+    binary search of the running sums for every number, the bins' own edges and the running
+    sums themselves included, for a sun's few patches and for all of them."""
+    from lanterna.engine.environment import GUIDE_BINS
+    env = Environment(_sun_image(), interpolation="Linear")
+    rng = np.random.default_rng(3)
+    for table in (env.table, env.bright):
+        cdf = table.cdf[:table.count]
+        u = np.concatenate([rng.random(200_000), np.arange(GUIDE_BINS) / GUIDE_BINS, cdf,
+                            np.nextafter(cdf[1:], 0.0), [1.0 - 1e-12]])
+        searched = np.clip(np.searchsorted(table.cdf, u, side="right") - 1, 0, table.count - 1)
+        np.testing.assert_array_equal(table.rank(u), searched)
+    assert env.bright.guide_unique.mean() > 0.99       # a sun's table rarely searches
+
+
 @pytest.mark.parametrize("encoding", ["linear", "srgb"])
 @pytest.mark.parametrize("interpolation", INTERPOLATIONS)
 def test_ranked_tables_sample_as_the_per_sample_look_ups(interpolation, encoding):
