@@ -159,12 +159,14 @@ def direction_to_equirectangular(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return u, v
 
 
-def equirectangular_to_direction(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`direction_to_equirectangular`: unit directions (N, 3)."""
+def equirectangular_to_direction(u: np.ndarray, v: np.ndarray, with_sin: bool = False):
+    """Inverse of :func:`direction_to_equirectangular`: unit directions (N, 3); with
+    ``with_sin``, (directions, sin(theta) (N,)) (theta from +Z: the sphere's Jacobian)."""
     phi = np.pi - 2.0 * np.pi * u
     theta = np.pi * (1.0 - v)
     s = np.sin(theta)
-    return np.stack([s * np.cos(phi), s * np.sin(phi), np.cos(theta)], axis=1)
+    d = np.stack([s * np.cos(phi), s * np.sin(phi), np.cos(theta)], axis=1)
+    return (d, s) if with_sin else d
 
 
 def direction_to_mirrorball(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -359,6 +361,7 @@ class Environment:
             out["texels"] = [[np.ascontiguousarray(self.pixels[r, c, ch], np.float64)
                               for r, c in corner] for ch in range(3)]
         return out
+
     def _corners(self, row, col):
         """The four floored knots (k00, k10, k01, k11) of patches (row, col): (i, j),
         (i, j + 1), (i + 1, j), (i + 1, j + 1), wrapping."""
@@ -433,10 +436,7 @@ class Environment:
             lo, hi = table.cdf[rank], table.cdf[rank + 1]
             u = np.stack([(u_cell - lo) / np.where(hi > lo, hi - lo, 1.0), u[:, 1]], 1)
         uu, vv, p_uv, (rank, s, t) = self._sample_patch(u_cell, u, table, rank)
-        phi = np.pi - 2.0 * np.pi * uu            # equirectangular_to_direction, sin kept
-        theta = np.pi * (1.0 - vv)
-        sin_t = np.sin(theta)
-        tex = np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), np.cos(theta)], axis=1)
+        tex, sin_t = equirectangular_to_direction(uu, vv, with_sin=True)
         pdf = np.where(sin_t > 0, p_uv / (2.0 * np.pi ** 2 * np.maximum(sin_t, 1e-300)), 0.0)
         wi = tex @ self.rotation                 # texture -> world (rotation transposed)
         if self.projection != "EQUIRECTANGULAR":

@@ -1127,10 +1127,7 @@ class EnvironmentLight:
             if len(rest_idx):
                 env_pdf[rest_idx] = self.environment.direction_pdf(w[rest_idx], self.table)
         pdf = self.solid_angle_pdf(x, n64, w, env_pdf)
-        cos_x = np.maximum(_dot(n64, w), 0.0)
-        ok = (pdf > 0) & (cos_x > 0)
-        weight = np.where(ok, cos_x / np.where(ok, pdf, 1.0), 0.0)
-        rgb[~ok] = 0.0
+        weight, ok = _cosine_weights(n64, w, pdf, rgb)
         # The image's own samples carry their radiance; the others look it up.
         look = np.flatnonzero(ok & ~env)
         if len(look):
@@ -1141,17 +1138,10 @@ class EnvironmentLight:
         """``sample_rgb`` where every sample comes from the image's table (the sky gathered,
         no portal: ``gather_sky``): the mixture is the table's density alone, which its
         samples bring with them."""
-        if pick is None:
-            w, rgb, pdf = self.environment.sample(np.clip(u, 0.0, 1.0 - 1e-12),
-                                                  table=self.table)
-        else:
-            w, rgb, pdf = self.environment.sample(
-                np.clip(u, 0.0, 1.0 - 1e-12), u_cell=np.clip(pick, 0.0, 1.0 - 1e-12),
-                table=self.table)
-        cos_x = np.maximum(_dot(n64, w), 0.0)
-        ok = (pdf > 0) & (cos_x > 0)
-        weight = np.where(ok, cos_x / np.where(ok, pdf, 1.0), 0.0)
-        rgb[~ok] = 0.0
+        u_cell = None if pick is None else np.clip(pick, 0.0, 1.0 - 1e-12)
+        w, rgb, pdf = self.environment.sample(np.clip(u, 0.0, 1.0 - 1e-12), u_cell=u_cell,
+                                              table=self.table)
+        weight, _ok = _cosine_weights(n64, w, pdf, rgb)
         return w, np.full(len(w), np.inf), weight, rgb
 
     def sample(self, x, n, u):
@@ -1159,6 +1149,15 @@ class EnvironmentLight:
         folded into the weight (``rgb`` is white); ``sample_rgb`` keeps the colour."""
         w, dist, weight, rgb = self.sample_rgb(x, n, u)
         return w, dist, weight * (rgb @ LUMINANCE)
+
+
+def _cosine_weights(n, w, pdf, rgb):
+    """A world sample's weight cos / pdf (N,) and where it counts (pdf > 0 and in front of
+    ``n``); ``rgb`` (N, 3) set to 0 where it does not."""
+    cos_x = np.maximum(_dot(n, w), 0.0)
+    ok = (pdf > 0) & (cos_x > 0)
+    rgb[~ok] = 0.0
+    return np.where(ok, cos_x / np.where(ok, pdf, 1.0), 0.0), ok
 
 
 # The light set ------------------------------------------------------------------------------
