@@ -151,7 +151,7 @@ def section_markdown(data: dict) -> str:
               f"({s['cpu_seconds']['textured'] - s['cpu_seconds']['mean']:.1f} s of CPU). "
               "Not counted by the estimate, and not measured apart: the fixed cost of each "
               "smaller batch (a look-up costs 294 ns in batches of 4,096, 719 ns in batches of "
-              "1,024, here), penumbra samples, the textured panel's three per-channel lights."]
+              "1,024, here) and penumbra samples."]
     return "\n".join(lines) + "\n"
 
 

@@ -158,7 +158,8 @@ def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.
             if len(pts) == 0:
                 continue
             if getattr(light, "per_sample_rgb", False):
-                # An image world: each sample has its own radiance (lights.EnvironmentLight).
+                # An image world or a textured emitter: each sample has its own radiance
+                # (lights.EnvironmentLight, lights.TriangleEmitter.sample_rgb).
                 w, dist, weight, rgb = light.sample_rgb(np.take(x, pts, axis=0),
                                                         np.take(n, pts, axis=0),
                                                         u2[sel], rest[sel])
@@ -170,7 +171,7 @@ def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.
             if shadow_map is not None and shadow_map.covers(li):
                 _classified_samples(groups, unshadowed, tally, shadow_map, li, light, x, n,
                                     offset_normals, accel, rng, k, pts, p_sel[sel],
-                                    w, dist, weight, live)
+                                    w, dist, weight, live, rgb)
                 continue
             if tally is not None:
                 tally["plain"] += int(live.sum())
@@ -271,9 +272,15 @@ def _count_classes(stats, tally, traced):
 
 
 def _classified_samples(groups, unshadowed, tally, shadow_map, li, light, x, n, offset_normals,
-                        accel, rng, k, pts, p_sel, w, dist, weight, live):
+                        accel, rng, k, pts, p_sel, w, dist, weight, live, rgb=None):
     """The samples of sampled light ``li`` at points ``pts`` (sorted), by their pair's class:
-    LIT terms go to ``unshadowed``, PENUMBRA samples (M per original) to ``groups``."""
+    LIT terms go to ``unshadowed``, PENUMBRA samples (M per original) to ``groups``.
+    ``rgb`` (len(pts), 3): each sample's radiance where the light has one per sample
+    (``per_sample_rgb``; None: ``light.rgb``)."""
+
+    def colour(rows):
+        return light.rgb if rgb is None else rgb[rows]
+
     in_bvh = getattr(light, "in_bvh", False)
     hittable = _hittable(light)
     tally["plain"] += int(live.sum())
@@ -299,11 +306,11 @@ def _classified_samples(groups, unshadowed, tally, shadow_map, li, light, x, n, 
         trace = below & ~near
         keep = ~below & ~near
         if keep.any():
-            unshadowed.append((p[keep], weight[lit[keep]], light.rgb, w[lit[keep]], hittable,
-                               li))
+            unshadowed.append((p[keep], weight[lit[keep]], colour(lit[keep]), w[lit[keep]],
+                               hittable, li))
         if trace.any():
             t = lit[trace]
-            groups.append((pts[t], w[t], dist[t], weight[t], light.rgb, in_bvh, hittable, li))
+            groups.append((pts[t], w[t], dist[t], weight[t], colour(t), in_bvh, hittable, li))
     # UMBRA: no light, no ray. PENUMBRA: every sample of the pair (live or not: the class
     # must not depend on the sample's numbers) becomes M fresh stratified samples.
     pen = np.flatnonzero(cls == PENUMBRA)
@@ -313,13 +320,17 @@ def _classified_samples(groups, unshadowed, tally, shadow_map, li, light, x, n, 
     if m == 1:
         t = pen[live[pen]]
         if len(t):
-            groups.append((pts[t], w[t], dist[t], weight[t], light.rgb, in_bvh, hittable, li))
+            groups.append((pts[t], w[t], dist[t], weight[t], colour(t), in_bvh, hittable, li))
         return
     p = np.repeat(pts[pen], m)
     u = sampling.stratified_2d(len(pen), m, rng).reshape(-1, 2)
-    w_m, dist_m, weight_m = light.sample(x[p], n[p], u)
+    if rgb is None:
+        w_m, dist_m, weight_m = light.sample(x[p], n[p], u)
+        rgb_m = light.rgb
+    else:
+        w_m, dist_m, weight_m, rgb_m = light.sample_rgb(x[p], n[p], u)
     weight_m = weight_m / (np.repeat(p_sel[pen], m) * (k * m))
     ok = (weight_m > 0) & np.isfinite(weight_m)
     if ok.any():
-        groups.append((p[ok], w_m[ok], dist_m[ok], weight_m[ok], light.rgb, in_bvh, hittable,
-                       li))
+        groups.append((p[ok], w_m[ok], dist_m[ok], weight_m[ok],
+                       rgb_m if rgb is None else rgb_m[ok], in_bvh, hittable, li))

@@ -151,28 +151,6 @@ def power_heuristic(p_this: np.ndarray, p_other: np.ndarray) -> np.ndarray:
     return np.where(np.isnan(out), np.where(p_other > 0, 0.0, 1.0), out)
 
 
-def _emitter_weights(context, prim, pdf, points, normals, directions,
-                     light_counts) -> np.ndarray:
-    """(N, 3) ``bsdf_strategy_weights`` of rays that meet emissive triangles ``prim``, per
-    colour channel: a textured emitter samples each channel as its own light
-    (``lights.textured_emitters``), so each channel has its own light density.
-    ``light_counts`` (N,): the light samples of the vertices the rays left."""
-    which = context.lights.channel_emitters[prim]
-    same = (which[:, 0] == which[:, 1]) & (which[:, 1] == which[:, 2])
-    out = np.ones((len(prim), 3))
-    if same.any():
-        out[same] = bsdf_strategy_weights(context, which[same, 0], pdf[same], points[same],
-                                          normals[same], directions[same],
-                                          light_counts=light_counts[same])[:, None]
-    rest = np.flatnonzero(~same)
-    for channel in range(3) if len(rest) else ():
-        out[rest, channel] = bsdf_strategy_weights(context, which[rest, channel], pdf[rest],
-                                                   points[rest], normals[rest],
-                                                   directions[rest],
-                                                   light_counts=light_counts[rest])
-    return out
-
-
 def light_strategy_weights(p_light, p_bsdf, strategy: str | None = None) -> np.ndarray:
     """(N,) the weight of light samples drawn with densities ``p_light`` where the lobe's
     rays would come with ``p_bsdf`` (``GLOSSY_LIGHT_STRATEGY``). A light sample whose
@@ -546,9 +524,9 @@ def shade_block(context: CameraContext, batch: int, pixels: int, camera, subset=
             if mis_pdf is not None:
                 lit = np.flatnonzero(np.any(emitted > 0, axis=1))
                 if len(lit):
-                    emitted[lit] *= _emitter_weights(context, prim[lit], mis_pdf[lit],
-                                                     mis_x[lit], mis_n[lit], d[lit],
-                                                     mis_count[lit])
+                    emitted[lit] *= bsdf_strategy_weights(
+                        context, context.lights.emitter_of_triangle[prim[lit]], mis_pdf[lit],
+                        mis_x[lit], mis_n[lit], d[lit], light_counts=mis_count[lit])[:, None]
             add_to_pixels(emission_sums, pixel_of, emitted if thr is None else thr * emitted)
             if light is not None:
                 if depth == 0:

@@ -157,18 +157,22 @@ def sample_spherical_triangle(a: np.ndarray, b: np.ndarray, c: np.ndarray,
 # Sampled lights -----------------------------------------------------------------------------
 class TriangleEmitter:
     """Emitting triangles of one object (or a rectangle light): radiance ``rgb`` (3,) times a
-    per-triangle factor ``scale`` (T,) in [0, 1] (1 by default; a textured emitter's channel,
-    ``textured_emitters``); triangles are sampled in proportion to their factor."""
+    per-triangle factor ``scale`` (T,) in [0, 1] (1 by default); triangles are sampled in
+    proportion to their area x factor. A textured emitter (``textured_emitter``) gives
+    ``radiance_at(tri, points)`` -> (N, 3), the radiance [W m^-2 sr^-1] at sampled points on
+    triangles ``tri``: its samples then carry their own radiance (``per_sample_rgb``,
+    ``sample_rgb``), ``rgb`` x ``scale`` only shapes where they go, and ``power`` (3,) [W]
+    is given."""
 
     kind = "mesh"
     camera_visible = False       # a rectangle light's Visibility > Camera (``ray_visible``)
 
     def __init__(self, name: str, triangles: np.ndarray, radiance: np.ndarray, two_sided: bool,
-                 in_bvh: bool = False, scale: np.ndarray | None = None, radiance_at=None):
+                 in_bvh: bool = False, scale: np.ndarray | None = None, radiance_at=None,
+                 power: np.ndarray | None = None):
         self.name = name
-        # ``radiance_at(tri, points)`` -> (N,) the radiance at sampled points on triangles
-        # ``tri`` in units of ``rgb`` (a texture's exact value; None: ``scale[tri]``).
         self.radiance_at = radiance_at
+        self.per_sample_rgb = radiance_at is not None    # ``direct.direct_terms`` reads it
         self.in_bvh = in_bvh   # an emissive mesh is also geometry: shadow rays must stop short
         self.tris = np.asarray(triangles, np.float64).reshape(-1, 3, 3)
         self.rgb = np.asarray(radiance, np.float64).reshape(3)   # one radiance per emitter
@@ -195,7 +199,8 @@ class TriangleEmitter:
         self.extent = float(np.linalg.norm(self.upper - self.lower))
         self.centroid = (self.tris.mean(axis=1) * self.areas[:, None]).sum(0) / self.total_area
         self.mean_scale = float(emitting.sum()) / self.total_area
-        self.power = np.pi * self.rgb * float(emitting.sum()) * (2 if two_sided else 1)
+        self.power = (np.pi * self.rgb * float(emitting.sum()) * (2 if two_sided else 1)
+                      if power is None else np.asarray(power, np.float64).reshape(3))
 
     def intersect(self, origins, directions, t_max):
         """Nearest hit t (N,) of rays with the triangles on their emitting side (inf: none
@@ -350,7 +355,36 @@ class TriangleEmitter:
         return (self.rgb @ LUMINANCE) * self.mean_scale * omega * (0.25 + cos_x)
 
     def sample(self, x, n, u):
-        """Directions, shadow distances and irradiance estimates L cos(theta_x) / pdf."""
+        """Directions, shadow distances and irradiance estimates L cos(theta_x) / pdf in
+        units of ``rgb`` (x ``scale`` of the sampled triangle)."""
+        direction, dist, pdf_w, tri, valid, cos_x, facing = self._sample_directions(x, n, u)
+        if self.scale is not None:
+            facing = facing * self.scale[tri]        # the radiance there: rgb x its factor
+        with np.errstate(divide="ignore", invalid="ignore"):
+            weight = np.where(valid, cos_x * facing / np.where(pdf_w > 0, pdf_w, 1.0), 0.0)
+        return direction, np.where(valid, dist, 0.0), weight
+
+    def sample_rgb(self, x, n, u, pick=None):
+        """``sample`` with a radiance per sample (a textured emitter, ``textured_emitter``):
+        (directions (N, 3), shadow distances (N,), cos(theta_x) / pdf (N,), the radiance
+        (N, 3) [W m^-2 sr^-1] at each sampled point, read from the texture only where the
+        sample can count); the irradiance estimate is their product. ``pick`` is unused (the
+        signature of ``EnvironmentLight.sample_rgb``)."""
+        direction, dist, pdf_w, tri, valid, cos_x, facing = self._sample_directions(x, n, u)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            weight = np.where(valid, cos_x * facing / np.where(pdf_w > 0, pdf_w, 1.0), 0.0)
+        rgb = np.zeros((len(x), 3))
+        live = np.flatnonzero(weight > 0)
+        if len(live):
+            rgb[live] = self.radiance_at(np.take(tri, live), np.take(x, live, axis=0)
+                                         + np.take(direction, live, axis=0)
+                                         * np.take(dist, live)[:, None])
+        return direction, np.where(valid, dist, 0.0), weight, rgb
+
+    def _sample_directions(self, x, n, u):
+        """The geometry of ``sample``: directions (N, 3), distances (N,), densities [1/sr]
+        (N,), the sampled triangles (N,), which samples are valid (N,), cos(theta_x) (N,) and
+        1 where the emitting side faces the point (N,)."""
         count = len(x)
         if self.use_solid_angle:
             rows = np.arange(count)
@@ -414,19 +448,7 @@ class TriangleEmitter:
             # A point on the sampled triangle gets nothing from it (``on_surface``).
             valid = (cos_l > 0) & ~self.on_surface(x, n, tri)
         cos_x = np.maximum(_dot(n, direction), 0.0)
-        facing = self._facing(x, tri, direction)
-        if self.radiance_at is not None:
-            # The texture is read only where the sample can count (in front of both).
-            live = np.flatnonzero(valid & (cos_x > 0) & (facing > 0))
-            radiance = np.zeros(count)
-            radiance[live] = self.radiance_at(tri[live], x[live] + direction[live]
-                                              * dist[live, None])
-            facing = facing * radiance
-        elif self.scale is not None:
-            facing = facing * self.scale[tri]        # the radiance there: rgb x its factor
-        with np.errstate(divide="ignore", invalid="ignore"):
-            weight = np.where(valid, cos_x * facing / np.where(pdf_w > 0, pdf_w, 1.0), 0.0)
-        return direction, np.where(valid, dist, 0.0), weight
+        return direction, dist, pdf_w, tri, valid, cos_x, self._facing(x, tri, direction)
 
 
 # Points per sub-triangle at which a textured emitter's radiance is averaged, and the least
@@ -458,15 +480,17 @@ def subdivide_triangles(tris: np.ndarray, segments: int):
     return corners, parent, bary
 
 
-def textured_emitters(name: str, scene, materials, triangles: np.ndarray, two_sided: bool):
-    """Light-sampling emitters of a mesh whose emission is textured (issue 24): its triangles
-    (indices ``triangles`` into the scene) cut into ``TEXTURED_EMITTER_TRIANGLES``
-    sub-triangles (at least the triangles themselves), each with its mean radiance over ``TEXTURED_EMITTER_POINTS`` points; one
-    ``TriangleEmitter`` per colour channel that emits (radiance e_c x its brightest value,
-    per-sub-triangle factors in [0, 1], floored at ``TEXTURED_EMITTER_FLOOR`` so that no part
-    that emits goes unsampled), so that each channel's samples follow its own power. A sample
-    then reads the texture at its own point (``radiance_at``): the estimate is unbiased, the
-    sub-triangles only shape its noise."""
+def textured_emitter(name: str, scene, materials, triangles: np.ndarray, two_sided: bool):
+    """The light-sampling emitter of a mesh whose emission is textured (issue 24), or None
+    where it emits nothing: its triangles (indices ``triangles`` into the scene) cut into
+    ``TEXTURED_EMITTER_TRIANGLES`` sub-triangles (at least the triangles themselves), each
+    with its mean radiance over ``TEXTURED_EMITTER_POINTS`` points; one ``TriangleEmitter``
+    whose sub-triangles are sampled by that radiance's luminance (floored at
+    ``TEXTURED_EMITTER_FLOOR`` of the brightest's, so that no part that emits goes
+    unsampled), and whose samples read the texture at their own points (``radiance_at``,
+    ``sample_rgb``): the estimate is unbiased, the sub-triangles only shape its noise. One
+    light, as Cycles samples a textured emissive mesh: three lights, one per colour channel,
+    paid every light sample's solid angles, shadow rays and shadow photons three times."""
     segments = max(1, int(np.sqrt(TEXTURED_EMITTER_TRIANGLES / max(len(triangles), 1))))
     corners, parent, bary = subdivide_triangles(scene.triangles[triangles], segments)
     k = TEXTURED_EMITTER_POINTS
@@ -478,6 +502,11 @@ def textured_emitters(name: str, scene, materials, triangles: np.ndarray, two_si
     mids = scene.material_ids[prim]
     radiance = materials.at(mids, prim, points[:, 0], points[:, 1]).emitted_radiance
     radiance = radiance.reshape(len(corners), k, 3).mean(axis=1)      # (S, 3)
+    luminance = radiance @ LUMINANCE
+    brightest = int(np.argmax(luminance))
+    peak = float(luminance[brightest])
+    if peak <= 0:
+        return None
     parents = np.asarray(triangles)[parent]                            # scene triangle per S
     # Per sub-triangle, the linear map from a point on its scene triangle's plane to that
     # triangle's barycentrics (least squares on the plane): (bu, bv) = rows @ (p - origin).
@@ -490,30 +519,20 @@ def textured_emitters(name: str, scene, materials, triangles: np.ndarray, two_si
                      (a11[:, None] * e2 - a12[:, None] * e1) / det], axis=1)   # (S, 2, 3)
     origin = t[:, 0]
 
-    def radiance_of(channel, peak):
-        def radiance_at(tri, points):
-            bary = np.einsum("nij,nj->ni", np.take(rows, tri, axis=0),
-                             points - np.take(origin, tri, axis=0))
-            bu = np.clip(bary[:, 0], 0.0, 1.0)
-            bv = np.clip(bary[:, 1], 0.0, 1.0 - bu)
-            prim = parents[tri]
-            value = materials.at(scene.material_ids[prim], prim, bu, bv).emitted_radiance
-            return value[:, channel] / peak
-        return radiance_at
+    def radiance_at(tri, points):
+        bary = np.einsum("nij,nj->ni", np.take(rows, tri, axis=0),
+                         points - np.take(origin, tri, axis=0))
+        bu = np.clip(bary[:, 0], 0.0, 1.0)
+        bv = np.clip(bary[:, 1], 0.0, 1.0 - bu)
+        prim = np.take(parents, tri)
+        return materials.at(scene.material_ids[prim], prim, bu, bv).emitted_radiance
 
-    out = []
-    for channel in range(3):
-        peak = float(radiance[:, channel].max())
-        if peak <= 0:
-            continue
-        rgb = np.zeros(3)
-        rgb[channel] = peak
-        label = f"{name} ({'RGB'[channel]})"
-        scale = np.maximum(radiance[:, channel] / peak, TEXTURED_EMITTER_FLOOR)
-        out.append(TriangleEmitter(label, corners, rgb, two_sided=two_sided, in_bvh=True,
-                                   scale=scale, radiance_at=radiance_of(channel, peak)))
-        out[-1].channel = channel
-    return out
+    scale = np.maximum(luminance / peak, TEXTURED_EMITTER_FLOOR)
+    areas = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0],
+                                          corners[:, 2] - corners[:, 0]), axis=1)
+    power = np.pi * (areas[:, None] * radiance).sum(axis=0) * (2 if two_sided else 1)
+    return TriangleEmitter(name, corners, radiance[brightest], two_sided=two_sided,
+                           in_bvh=True, scale=scale, radiance_at=radiance_at, power=power)
 
 
 def area_light_triangles(light: AreaLight) -> np.ndarray:
@@ -1203,9 +1222,6 @@ class LightSet:
         materials = MaterialTable(scene)
         # Per scene triangle: its emitter's index in ``sampled`` (-1: it emits nothing).
         self.emitter_of_triangle = np.full(len(scene.triangles), -1)
-        # Per scene triangle and colour channel: the emitter that samples that channel's
-        # light (a textured emitter is one per channel, ``textured_emitters``; -1: none).
-        self.channel_emitters = np.full((len(scene.triangles), 3), -1)
         if len(scene.triangles):
             emissive = materials.is_emissive[scene.material_ids]
             self.emissive_triangles = emissive
@@ -1214,22 +1230,19 @@ class LightSet:
                 keys = scene.object_ids[idx].astype(np.int64) * 65536 + scene.material_ids[idx]
                 for key in np.unique(keys):
                     sel = idx[keys == key]
-                    self.emitter_of_triangle[sel] = len(self.sampled)
                     oid, mid = int(key // 65536), int(key % 65536)
                     name = scene.object_names[oid] if oid < len(scene.object_names) else "Mesh"
                     surface = materials.at(np.array([mid]))
                     if materials.textured[mid]:
-                        channels = textured_emitters(name, scene, materials, sel,
-                                                     bool(surface.both_sides[0]))
-                        for emitter in channels:
-                            self.channel_emitters[sel, emitter.channel] = len(self.sampled)
-                            self.sampled.append(emitter)
-                        self.emitter_of_triangle[sel] = self.channel_emitters[sel].max(axis=1)
-                        continue
-                    self.channel_emitters[sel] = len(self.sampled)
-                    self.sampled.append(TriangleEmitter(
-                        name, scene.triangles[sel], surface.emitted_radiance[0],
-                        two_sided=bool(surface.both_sides[0]), in_bvh=True))
+                        emitter = textured_emitter(name, scene, materials, sel,
+                                                   bool(surface.both_sides[0]))
+                    else:
+                        emitter = TriangleEmitter(
+                            name, scene.triangles[sel], surface.emitted_radiance[0],
+                            two_sided=bool(surface.both_sides[0]), in_bvh=True)
+                    if emitter is not None:
+                        self.emitter_of_triangle[sel] = len(self.sampled)
+                        self.sampled.append(emitter)
         else:
             self.emissive_triangles = np.zeros(0, bool)
         self.world_index = -1          # the world's index in ``sampled`` (-1: black world)

@@ -7,6 +7,8 @@ is read, against closed forms.
   point below it as Lambert's polygon formula summed over its four texel cells says: light
   samples read the texture at their own points, so the estimate is unbiased (the mean
   radiance, today's untextured way, is 2x off at that point: the test fails on it).
+* With shadow photons, a textured emitter's lit and penumbra samples keep their own radiance:
+  the same light as plain shadow rays give, channel by channel.
 * Photons leave a textured emitter in proportion to each texel's power.
 """
 import sys
@@ -22,6 +24,7 @@ from lanterna.engine.bsdf import MaterialTable  # noqa: E402
 from lanterna.engine.direct import direct_irradiance  # noqa: E402
 from lanterna.engine.lights import LightSet  # noqa: E402
 from lanterna.engine.photons import emit_photons  # noqa: E402
+from lanterna.engine.shadow_photons import LIT, PENUMBRA, build_shadow_photon_map  # noqa: E402
 from lanterna.engine.scene import Camera, Material, Scene, World  # noqa: E402
 from lanterna.engine.shaders import Closure  # noqa: E402
 
@@ -121,6 +124,43 @@ def test_textured_emitter_direct_light_matches_lambert_per_texel():
                                  [[-0.5, -0.5, 1], [0.5, -0.5, 1], [0.5, 0.5, 1], [-0.5, 0.5, 1]],
                                  10.0 * TEXELS[..., :3].reshape(-1, 3).mean(axis=0))
     assert np.all(exact > 1.5 * uniform)
+
+
+def test_textured_emitter_with_shadow_photons_gives_the_plain_light():
+    """The textured panel over the floor, a plate half under it: with a shadow-photon map,
+    LIT samples (no ray) and PENUMBRA samples (M fresh ones each) carry the radiance at their
+    own points (``TriangleEmitter.sample_rgb``), so each channel of the floor's irradiance
+    matches a plain call's, within 5 standard errors over 24 repeats (seeds' spread). It
+    fails when those samples take the light's sampling colour (its brightest part's) instead."""
+    scene = _panel_scene()
+    plate = quad([0.25, 0, 0.6], [0.25, 0, 0], [0, 0.6, 0])
+    uv = np.concatenate([scene.corner_attributes["uv"], np.zeros((2, 3, 2), np.float32)])
+    scene = _scene(scene.materials + [Material("Plate", diffuse=np.full(3, 0.5))],
+                   np.concatenate([scene.triangles, plate]),
+                   np.concatenate([scene.material_ids, [2, 2]]), uv)
+    accel, lights = Accelerator(scene.triangles, threads=1), LightSet(scene)
+    smap = build_shadow_photon_map(scene, accel, lights, 100_000, seed=3)
+    g = np.linspace(-0.9, 0.9, 13)
+    x = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
+    x = np.column_stack([x, np.full(len(x), 1e-4)])
+    n = np.tile([0.0, 0.0, 1.0], (len(x), 1))
+    cls = smap.classify(x, n, 0)
+    lit, pen = cls == LIT, cls == PENUMBRA
+    assert lit.sum() >= 20 and pen.sum() >= 20
+    repeats = 24
+    xs, ns = np.tile(x, (repeats, 1)), np.tile(n, (repeats, 1))
+    plain = direct_irradiance(xs, ns, lights, accel, sampling.rng_for(3, 9),
+                              4).reshape(repeats, -1, 3)
+    fast = direct_irradiance(xs, ns, lights, accel, sampling.rng_for(4, 9), 4,
+                             shadow_map=smap).reshape(repeats, -1, 3)
+    se = np.sqrt((plain.var(axis=0, ddof=1) + fast.var(axis=0, ddof=1)) / repeats)
+    diff = fast.mean(axis=0) - plain.mean(axis=0)
+    for mask in (lit, pen):
+        assert np.all(np.abs(diff[mask]) <= 5 * se[mask] + 1e-9 * plain.mean()), \
+            np.abs(diff[mask] / np.maximum(se[mask], 1e-30)).max()
+        # The region as a whole, channel by channel (4 standard errors of its mean).
+        region_se = np.sqrt((se[mask] ** 2).sum(axis=0)) / mask.sum()
+        assert np.all(np.abs(diff[mask].mean(axis=0)) <= 4 * region_se)
 
 
 def test_photons_leave_a_textured_emitter_by_texel_power():
