@@ -319,6 +319,9 @@ class SurfaceParams:
             {k: np.broadcast_to(np.asarray(v, np.float64), (len(material),))
              for k, v in ray.items()}
         self._cache = {}
+        # The node-driven reflectance at the hits (``_textured_reflectance``; False: not
+        # evaluated yet).
+        self._textured = False
         # Slots a subset inherits, each taken from its parent's array when first read:
         # {name: (parent's array, integer index into it)}.
         self._inherited = {}
@@ -332,7 +335,7 @@ class SurfaceParams:
                 array, index = self._inherited.pop(name)
                 self._cache[name] = np.take(array, index, axis=0)
             elif self.hits is not None and name in REFLECTANCE_SLOTS:
-                self._reflectance_slots()
+                self._cache[name] = self._reflectance_slot(name)
             elif self.hits is not None and name in EMISSION_SLOTS:
                 self._emission_slots()
             else:
@@ -362,54 +365,102 @@ class SurfaceParams:
             values = {**(values or {}), **{f"ray:{k}": v[at] for k, v in self.ray.items()}}
         return values
 
-    def _reflectance_slots(self) -> None:
-        """The ``REFLECTANCE_SLOTS``: the per-material rows, with the rows of hits on
-        materials whose reflectance is node-driven replaced by their per-hit values."""
+    def _textured_reflectance(self):
+        """The node-driven reflectance at the hits on materials whose reflectance is
+        node-driven, evaluated once for all ``REFLECTANCE_SLOTS`` (and shared with
+        ``subset``s): (position (N,) of each hit's row in the compact arrays, -1 for hits on
+        other materials; {"diffuse", "specular", "translucent": (K, 3), "ratio",
+        "roughness", "metallic", "transmission": (K, C), "base": (K, C, 3)}, the closures'
+        columns past a material's own at their defaults), or None where no hit is on such
+        a material."""
+        if self._textured is False:
+            table, material = self.table, self.material
+            prim, bu, bv = self.hits
+            parts = []
+            for material_id, at in self._textured_hits(table.textured_reflectance):
+                diffuse, specular, translucent, lobes = table.textures.reflectance(
+                    material_id, prim[at], bu[at], bv[at], with_translucent=True,
+                    with_ratios=True, hit_values=self._view(material_id, at))
+                parts.append((at, diffuse, specular, translucent, lobes))
+            if not parts:
+                self._textured = None
+                return None
+            count, closures = sum(len(p[0]) for p in parts), table.closure_count
+            compact = {"ratio": np.ones((count, closures)),
+                       "roughness": np.full((count, closures), np.nan),
+                       "metallic": np.full((count, closures), np.nan),
+                       "base": np.full((count, closures, 3), np.nan),
+                       "transmission": np.full((count, closures), np.nan)}
+            position = np.full(len(material), -1, np.int64)
+            start = 0
+            for at, *_rest, (weights, rough, metal, colour, tw) in parts:
+                rows = slice(start, start + len(at))
+                position[at] = np.arange(start, start + len(at))
+                c = weights.shape[1]
+                compact["ratio"][rows, :c], compact["roughness"][rows, :c] = weights, rough
+                compact["metallic"][rows, :c], compact["base"][rows, :c] = metal, colour
+                compact["transmission"][rows, :c] = tw
+                start += len(at)
+            for k, name in enumerate(("diffuse", "specular", "translucent"), start=1):
+                compact[name] = np.concatenate([np.asarray(p[k], np.float64).reshape(-1, 3)
+                                                for p in parts])
+            self._textured = (position, compact)
+        return self._textured
+
+    # Per-hit lobe inputs (``LobeInputs``): the compact arrays' names and defaults.
+    _LOBE_SLOTS = {"lobe_ratio": ("ratio", 1.0), "lobe_roughness": ("roughness", np.nan),
+                   "lobe_metallic": ("metallic", np.nan), "lobe_base": ("base", np.nan),
+                   "lobe_transmission": ("transmission", np.nan)}
+
+    def _reflectance_slot(self, name):
+        """One of the ``REFLECTANCE_SLOTS``: the per-material rows, those of hits on
+        materials whose reflectance is node-driven replaced by their per-hit values
+        (``_textured_reflectance``); each slot is formed only when read (a photon's
+        roulette reads two of them, a camera hit's direct light one)."""
         table, material = self.table, self.material
-        diffuse = np.take(table.diffuse, material, axis=0)
-        specular = np.take(table.specular, material, axis=0)
-        translucent = np.take(table.translucent, material, axis=0)
-        ratio = np.ones((len(material), table.closure_count))
-        roughness = np.full((len(material), table.closure_count), np.nan)
-        metallic = np.full((len(material), table.closure_count), np.nan)
-        base = np.full((len(material), table.closure_count, 3), np.nan)
-        transmission = np.full((len(material), table.closure_count), np.nan)
-        prim, bu, bv = self.hits
-        for material_id, at in self._textured_hits(table.textured_reflectance):
-            diffuse[at], specular[at], translucent[at], (weights, rough, metal, colour, tw) = \
-                table.textures.reflectance(material_id, prim[at], bu[at], bv[at],
-                                           with_translucent=True, with_ratios=True,
-                                           hit_values=self._view(material_id, at))
-            c = weights.shape[1]
-            ratio[at, :c], roughness[at, :c] = weights, rough
-            metallic[at, :c], base[at, :c], transmission[at, :c] = metal, colour, tw
-        cache = self._cache
-        cache["lobe_ratio"], cache["lobe_roughness"] = ratio, roughness
-        cache["lobe_metallic"], cache["lobe_base"] = metallic, base
-        cache["lobe_transmission"] = transmission
-        cache["diffuse"], cache["specular"] = diffuse, specular
-        cache["translucent"] = translucent
-        cache["diffuse_over_pi"] = diffuse / np.pi
-        cache["transport_diffuse"] = (diffuse * np.take(table.layer_kept, material, axis=0)
-                                      + translucent)
-        layer = np.take(table.layer_albedo, material, axis=0)
-        if table.has_lobe_inputs:        # a specular layer mixed in, or metal, per hit
-            # Only hits on node-driven materials: elsewhere the lobe inputs are their means
-            # (ratio 1, NaN shares), whose factors are 1.
-            closure = np.take(table.layer_closure, material)
-            mixed = np.flatnonzero((closure >= 0)
-                                   & np.take(table.textured_reflectance, material))
-            layer[mixed] *= ratio[mixed, closure[mixed], None]
-            layer[mixed] *= metal_factor("dielectric", metallic[mixed, closure[mixed]],
-                                         np.take(table.layer_metallic,
-                                                 material[mixed]))[:, None]
-            layer[mixed] *= transmission_factor("below", transmission[mixed, closure[mixed]],
-                                                np.take(table.layer_transmission,
-                                                        material[mixed]))[:, None]
-        cache["transport_specular"] = specular + layer
+        textured = self._textured_reflectance()
+        if name in self._LOBE_SLOTS:
+            key, default = self._LOBE_SLOTS[name]
+            shape = (len(material), table.closure_count) + ((3,) if key == "base" else ())
+            out = np.full(shape, default)
+        else:
+            out = np.take(getattr(table, name), material, axis=0)
+        if textured is None:
+            return out
+        position, compact = textured
+        at = np.flatnonzero(position >= 0)
+        rows = np.take(position, at)
+        if name in self._LOBE_SLOTS:
+            out[at] = np.take(compact[self._LOBE_SLOTS[name][0]], rows, axis=0)
+        elif name in ("diffuse", "specular", "translucent"):
+            out[at] = np.take(compact[name], rows, axis=0)
+        elif name == "diffuse_over_pi":
+            out[at] = np.take(compact["diffuse"], rows, axis=0) / np.pi
+        elif name == "transport_diffuse":
+            out[at] = (np.take(compact["diffuse"], rows, axis=0)
+                       * np.take(table.layer_kept, material[at], axis=0)
+                       + np.take(compact["translucent"], rows, axis=0))
+        elif name == "transport_specular":
+            layer = np.take(table.layer_albedo, material[at], axis=0)
+            if table.has_lobe_inputs:    # a specular layer mixed in, or metal, per hit
+                closure = np.take(table.layer_closure, material[at])
+                mixed = np.flatnonzero(closure >= 0)
+                pick = (np.take(rows, mixed), closure[mixed])
+                layer[mixed] *= compact["ratio"][pick][:, None]
+                layer[mixed] *= metal_factor("dielectric", compact["metallic"][pick],
+                                             np.take(table.layer_metallic,
+                                                     material[at][mixed]))[:, None]
+                layer[mixed] *= transmission_factor("below", compact["transmission"][pick],
+                                                    np.take(table.layer_transmission,
+                                                            material[at][mixed]))[:, None]
+            out[at] = np.take(compact["specular"], rows, axis=0) + layer
+        else:
+            raise KeyError(name)
+        return out
 
     def _emission_slots(self) -> None:
-        """The ``EMISSION_SLOTS``, as ``_reflectance_slots`` for node-driven emission."""
+        """The ``EMISSION_SLOTS``: the per-material rows, those of hits on materials whose
+        emission is node-driven replaced by their per-hit values (both slots at once)."""
         table, material = self.table, self.material
         exitance = np.take(table.exitance, material, axis=0)
         prim, bu, bv = self.hits
@@ -452,7 +503,7 @@ class SurfaceParams:
         """Set the diffuse reflectance (k, 3) of the hits ``index`` (and what follows from it:
         ``diffuse_over_pi``, ``transport_diffuse``): the camera's pixel-averaged texture
         (``integrator.supersample_textures``)."""
-        for name in TEXTURED_SLOTS:
+        for name in ("diffuse", "diffuse_over_pi", "transport_diffuse", "translucent"):
             self._take(name)
         cache = self._cache
         for name in ("diffuse", "diffuse_over_pi", "transport_diffuse"):
@@ -480,6 +531,13 @@ class SurfaceParams:
             out._inherited.update((k, (array, np.take(parent_rows, rows)))
                                   for k, (array, parent_rows) in self._inherited.items()
                                   if k not in out._inherited)
+            # The textures' values, for the slots the parent has not formed.
+            if self._textured is None:
+                out._textured = None
+            elif self._textured is not False:
+                position, compact = self._textured
+                kept = np.take(position, rows)
+                out._textured = (kept, compact) if (kept >= 0).any() else None
         return out
 
     def bsdf(self, transport: bool = False) -> "SurfaceBSDF":
