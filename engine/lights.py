@@ -162,7 +162,7 @@ class TriangleEmitter:
     ``radiance_at(tri, points)`` -> (N, 3), the radiance [W m^-2 sr^-1] at sampled points on
     triangles ``tri``: its samples then carry their own radiance (``per_sample_rgb``,
     ``sample_rgb``), ``rgb`` x ``scale`` only shapes where they go, and ``power`` (3,) [W]
-    is given."""
+    is given (the flux from its parts' mean radiance: what shadow photons are shared by)."""
 
     kind = "mesh"
     camera_visible = False       # a rectangle light's Visibility > Camera (``ray_visible``)

@@ -139,6 +139,7 @@ def test_textured_emitter_with_shadow_photons_gives_the_plain_light():
                    np.concatenate([scene.triangles, plate]),
                    np.concatenate([scene.material_ids, [2, 2]]), uv)
     accel, lights = Accelerator(scene.triangles, threads=1), LightSet(scene)
+    assert len(lights.sampled) == 1 and lights.sampled[0].per_sample_rgb   # one light
     smap = build_shadow_photon_map(scene, accel, lights, 100_000, seed=3)
     g = np.linspace(-0.9, 0.9, 13)
     x = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
