@@ -398,10 +398,15 @@ class MaterialTextures:
                                         for m, t in zip(scene.materials, self.textured)], bool)
         # Materials with a Principled BSDF whose Metallic, Base Color or Transmission Weight
         # is node-driven: its metal lobe's weight and colour, its glass lobe's weight and
-        # tint, and its dielectric lobes' weight, per hit.
+        # tint, and its dielectric lobes' weight, per hit. Base Color reaches the lobes only
+        # through a metal or glass part: driven alone, under a Metallic and a Transmission
+        # Weight of 0, it leaves them as they are (and the hits need no per-hit inputs).
         self.lobe_principled = np.array([t and any(c.kind == "principled" and (
-            "metallic" in c.textures or "base_color" in c.textures
-            or "transmission" in c.textures) for c in m.closures)
+            "metallic" in c.textures or "transmission" in c.textures
+            or ("base_color" in c.textures and (np.any(c.params.get("metallic", 0.0) > 0)
+                                                or np.any(c.params.get("transmission", 0.0)
+                                                          > 0))))
+            for c in m.closures)
             for m, t in zip(scene.materials, self.textured)], bool)
         # Materials whose node-driven inputs read the view (``VIEW_NODES``).
         self.view_inputs = np.array([t and _reads_nodes(m, g) for m, g, t in

@@ -83,6 +83,24 @@ def test_surface_params_read_the_texture_at_each_hit():
     assert not table.constant_per_material
 
 
+def test_a_base_colour_alone_needs_no_per_hit_lobe_inputs():
+    """A Principled BSDF's node-driven Base Color reaches its lobes only through the metal and
+    glass parts: under Metallic and Transmission Weight 0 its hits take no per-hit lobe inputs
+    (``SurfaceParams.lobe_inputs`` None: the lobes made with the means are exact there); with
+    Metallic above 0 they do (the metal lobe's colour follows the texture)."""
+    tris = quad([0, 0, 0], [1, 0, 0], [0, 1, 0])
+    prim, bu, bv = np.array([0, 0, 1, 1]), np.full(4, 0.2), np.full(4, 0.3)
+    for metallic, per_hit in ((0.0, False), (0.5, True)):
+        closure = Closure("principled", params={"metallic": metallic})
+        closure.textures["base_color"] = [(("Image", "Color"), None)]
+        material = Material("Floor", diffuse=np.full(3, 0.5), closures=(closure,),
+                            graph=_image_graph())
+        table = MaterialTable(_scene([material], tris, [0, 0], _quad_uv()))
+        inputs = table.at(np.zeros(4, np.int64), prim, bu, bv).lobe_inputs
+        assert bool(table.lobe_textured[0]) == per_hit
+        assert (inputs is not None) == per_hit, metallic
+
+
 def _panel_scene():
     """A 1 x 1 m emitting quad at z = 1 facing down over a dark floor."""
     panel = quad([0, 0, 1.0], [0, 0.5, 0], [0.5, 0, 0])          # wound to face down
