@@ -322,6 +322,7 @@ class SurfaceParams:
         # The node-driven reflectance at the hits (``_textured_reflectance``; False: not
         # evaluated yet).
         self._textured = False
+        self._textured_rows = None     # (hits on those materials, their compact rows)
         # Slots a subset inherits, each taken from its parent's array when first read:
         # {name: (parent's array, integer index into it)}.
         self._inherited = {}
@@ -428,8 +429,10 @@ class SurfaceParams:
         if textured is None:
             return out
         position, compact = textured
-        at = np.flatnonzero(position >= 0)
-        rows = np.take(position, at)
+        if self._textured_rows is None:         # formed once for all the slots read
+            at = np.flatnonzero(position >= 0)
+            self._textured_rows = (at, np.take(position, at))
+        at, rows = self._textured_rows
         if name in self._LOBE_SLOTS:
             out[at] = np.take(compact[self._LOBE_SLOTS[name][0]], rows, axis=0)
         elif name in ("diffuse", "specular", "translucent"):
