@@ -117,10 +117,13 @@ EXACT_PARAMS = {("principled", "base_color"), ("principled", "metallic"),
 def interpolate_corners(corner: np.ndarray, prim, bu, bv) -> np.ndarray:
     """(N, k) float64: a (T, 3, k) per-corner attribute at hits on triangles ``prim`` with
     barycentrics (bu, bv)."""
-    c = np.take(corner, prim, axis=0).astype(np.float64)
-    u = np.asarray(bu, np.float64)[:, None]
-    v = np.asarray(bv, np.float64)[:, None]
-    return c[:, 0] * (1.0 - u - v) + c[:, 1] * u + c[:, 2] * v
+    c = np.take(corner, prim, axis=0)
+    u, v = np.asarray(bu, np.float64), np.asarray(bv, np.float64)
+    w = 1.0 - u - v
+    out = np.empty((c.shape[0], c.shape[2]))
+    for k in range(c.shape[2]):        # a column at a time, widened to float64 as it goes
+        out[:, k] = c[:, 0, k] * w + c[:, 1, k] * u + c[:, 2, k] * v
+    return out
 
 
 # ``Closure.textures`` key of a closure's per-hit weight: the node-driven Facs of the Mix
