@@ -155,6 +155,12 @@ def sample_spherical_triangle(a: np.ndarray, b: np.ndarray, c: np.ndarray,
 
 
 # Sampled lights -----------------------------------------------------------------------------
+def _over_pdf(valid, value, pdf):
+    """(N,) ``value`` / ``pdf`` where ``valid`` (and the density is positive), else 0."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(valid, value / np.where(pdf > 0, pdf, 1.0), 0.0)
+
+
 class TriangleEmitter:
     """Emitting triangles of one object (or a rectangle light): radiance ``rgb`` (3,) times a
     per-triangle factor ``scale`` (T,) in [0, 1] (1 by default); triangles are sampled in
@@ -360,9 +366,7 @@ class TriangleEmitter:
         direction, dist, pdf_w, tri, valid, cos_x, facing = self._sample_directions(x, n, u)
         if self.scale is not None:
             facing = facing * self.scale[tri]        # the radiance there: rgb x its factor
-        with np.errstate(divide="ignore", invalid="ignore"):
-            weight = np.where(valid, cos_x * facing / np.where(pdf_w > 0, pdf_w, 1.0), 0.0)
-        return direction, np.where(valid, dist, 0.0), weight
+        return direction, np.where(valid, dist, 0.0), _over_pdf(valid, cos_x * facing, pdf_w)
 
     def sample_rgb(self, x, n, u, pick=None):
         """``sample`` with a radiance per sample (a textured emitter, ``textured_emitter``):
@@ -371,8 +375,7 @@ class TriangleEmitter:
         sample can count); the irradiance estimate is their product. ``pick`` is unused (the
         signature of ``EnvironmentLight.sample_rgb``)."""
         direction, dist, pdf_w, tri, valid, cos_x, facing = self._sample_directions(x, n, u)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            weight = np.where(valid, cos_x * facing / np.where(pdf_w > 0, pdf_w, 1.0), 0.0)
+        weight = _over_pdf(valid, cos_x * facing, pdf_w)
         rgb = np.zeros((len(x), 3))
         live = np.flatnonzero(weight > 0)
         if len(live):
