@@ -167,15 +167,16 @@ class TriangleEmitter:
     proportion to their area x factor. A textured emitter (``textured_emitter``) gives
     ``radiance_at(tri, points)`` -> (N, 3), the radiance [W m^-2 sr^-1] at sampled points on
     triangles ``tri``: its samples then carry their own radiance (``per_sample_rgb``,
-    ``sample_rgb``), ``rgb`` x ``scale`` only shapes where they go, and ``power`` (3,) [W]
-    is given (the flux from its parts' mean radiance: what shadow photons are shared by)."""
+    ``sample_rgb``), ``rgb`` x ``scale`` only shapes where they go, and ``mean_radiance``
+    (T, 3) gives each triangle's mean, from which ``power`` is summed (what shadow photons
+    are shared by)."""
 
     kind = "mesh"
     camera_visible = False       # a rectangle light's Visibility > Camera (``ray_visible``)
 
     def __init__(self, name: str, triangles: np.ndarray, radiance: np.ndarray, two_sided: bool,
                  in_bvh: bool = False, scale: np.ndarray | None = None, radiance_at=None,
-                 power: np.ndarray | None = None):
+                 mean_radiance: np.ndarray | None = None):
         self.name = name
         self.radiance_at = radiance_at
         self.per_sample_rgb = radiance_at is not None    # ``direct.direct_terms`` reads it
@@ -205,8 +206,9 @@ class TriangleEmitter:
         self.extent = float(np.linalg.norm(self.upper - self.lower))
         self.centroid = (self.tris.mean(axis=1) * self.areas[:, None]).sum(0) / self.total_area
         self.mean_scale = float(emitting.sum()) / self.total_area
-        self.power = (np.pi * self.rgb * float(emitting.sum()) * (2 if two_sided else 1)
-                      if power is None else np.asarray(power, np.float64).reshape(3))
+        sides = 2 if two_sided else 1
+        self.power = (np.pi * self.rgb * float(emitting.sum()) * sides if mean_radiance is None
+                      else np.pi * (self.areas[:, None] * mean_radiance).sum(axis=0) * sides)
 
     def intersect(self, origins, directions, t_max):
         """Nearest hit t (N,) of rays with the triangles on their emitting side (inf: none
@@ -531,11 +533,9 @@ def textured_emitter(name: str, scene, materials, triangles: np.ndarray, two_sid
         return materials.at(scene.material_ids[prim], prim, bu, bv).emitted_radiance
 
     scale = np.maximum(luminance / peak, TEXTURED_EMITTER_FLOOR)
-    areas = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0],
-                                          corners[:, 2] - corners[:, 0]), axis=1)
-    power = np.pi * (areas[:, None] * radiance).sum(axis=0) * (2 if two_sided else 1)
     return TriangleEmitter(name, corners, radiance[brightest], two_sided=two_sided,
-                           in_bvh=True, scale=scale, radiance_at=radiance_at, power=power)
+                           in_bvh=True, scale=scale, radiance_at=radiance_at,
+                           mean_radiance=radiance)
 
 
 def area_light_triangles(light: AreaLight) -> np.ndarray:
