@@ -101,6 +101,39 @@ def test_a_base_colour_alone_needs_no_per_hit_lobe_inputs():
         assert (inputs is not None) == per_hit, metallic
 
 
+def test_textures_read_in_batches_give_the_values_read_at_once(monkeypatch):
+    """Hits on textured materials are evaluated in batches (``bsdf.TEXTURE_BATCH``) and a
+    mesh's photons drawn in batches (``photons.EMIT_BATCH``), on a pool where one is given:
+    with batches of 7 rows, hits of two textured materials interleaved and a pool, every
+    slot and every photon is what one batch gives, bit for bit."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from lanterna.engine import bsdf, photons
+
+    panel = _panel_scene()
+    panel.materials[0].emit_both_sides = True              # photons leave either side
+    scene = _scene([panel.materials[0], _textured_material("Floor", "diffuse")],
+                   panel.triangles, panel.material_ids, np.concatenate([_quad_uv()] * 2))
+    rng = np.random.default_rng(4)
+    prim = rng.integers(0, 4, 300)
+    bu, bv = rng.random(300) * 0.5, rng.random(300) * 0.5
+    names = ("diffuse", "specular", "transport_diffuse", "exitance", "emitted_radiance")
+
+    def read():
+        hits = MaterialTable(scene).at(scene.material_ids[prim], prim, bu, bv)
+        with ThreadPoolExecutor(2) as pool:
+            em = emit_photons(scene, 1000, sampling.rng_for(3, sampling.STREAM_PHOTON),
+                              pool=pool)
+        return [getattr(hits, name) for name in names] + [em.origins, em.directions, em.power]
+
+    whole = read()
+    monkeypatch.setattr(bsdf, "TEXTURE_BATCH", 7)
+    monkeypatch.setattr(photons, "EMIT_BATCH", 7)
+    for name, a, b in zip(names + ("origins", "directions", "power"), whole, read()):
+        assert np.array_equal(a, b), name
+    assert len(np.unique(whole[0][:, 0])) > 2 and len(np.unique(whole[3][:, 0])) > 2
+
+
 def _panel_scene():
     """A 1 x 1 m emitting quad at z = 1 facing down over a dark floor."""
     panel = quad([0, 0, 1.0], [0, 0.5, 0], [0.5, 0, 0])          # wound to face down
