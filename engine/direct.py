@@ -33,7 +33,9 @@ Shadow photons (seed 7.2, 9.6; ``engine/shadow_photons.py``)
     lights, the world and delta lights keep plain shadow rays. Without a map the code path, the random numbers
     and the results are those of a plain call.
 
-All shadow rays of a call go to Embree in one batch.
+All shadow rays of a call go to Embree in one batch. Lights draw their samples in batches of
+``LIGHT_SAMPLE_BATCH`` points (``draw_light_samples``): a light's temporaries over hundreds of
+thousands of samples fall out of the CPU's caches into fresh memory pages.
 """
 from __future__ import annotations
 
@@ -45,6 +47,30 @@ from . import sampling
 from .lights import LightSet, ray_visible
 
 LIT, UMBRA, PENUMBRA = 0, 1, 2          # shadow-photon classes (engine/shadow_photons.py)
+# Light samples drawn at once (``draw_light_samples``). The textured room's panel at 400,000
+# samples: its radiance 0.14-0.22 s at once, 0.08 s in batches (the same values).
+LIGHT_SAMPLE_BATCH = 1 << 16
+
+
+def draw_light_samples(light, x, n, points, u, pick=None):
+    """A sampled light's samples at points ``x[points]`` with normals ``n[points]`` for
+    numbers ``u`` (P, 2) (and ``pick`` (P,), the rest of each sample's choice number, for
+    lights with a radiance per sample): directions (P, 3), shadow distances (P,), weights
+    (P,) and, for ``per_sample_rgb`` lights, radiances (P, 3) (else None); drawn in batches
+    of ``LIGHT_SAMPLE_BATCH``, each batch's points gathered from ``x`` and ``n`` by itself."""
+    per_sample = getattr(light, "per_sample_rgb", False)
+    parts = []
+    for start in range(0, max(len(points), 1), LIGHT_SAMPLE_BATCH):
+        at = slice(start, start + LIGHT_SAMPLE_BATCH)
+        xs, ns = np.take(x, points[at], axis=0), np.take(n, points[at], axis=0)
+        if per_sample:
+            parts.append(light.sample_rgb(xs, ns, u[at], None if pick is None else pick[at]))
+        else:
+            parts.append(tuple(light.sample(xs, ns, u[at])) + (None,))
+    if len(parts) == 1:
+        return parts[0]
+    return tuple(None if part[0] is None else np.concatenate(part)
+                 for part in zip(*parts))
 
 
 def direct_irradiance(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.random.Generator,
@@ -157,15 +183,9 @@ def direct_terms(x: np.ndarray, n: np.ndarray, lights: LightSet, accel, rng: np.
             pts = point_of[sel]
             if len(pts) == 0:
                 continue
-            if getattr(light, "per_sample_rgb", False):
-                # An image world or a textured emitter: each sample has its own radiance
-                # (lights.EnvironmentLight, lights.TriangleEmitter.sample_rgb).
-                w, dist, weight, rgb = light.sample_rgb(np.take(x, pts, axis=0),
-                                                        np.take(n, pts, axis=0),
-                                                        u2[sel], rest[sel])
-            else:
-                (w, dist, weight), rgb = light.sample(np.take(x, pts, axis=0),
-                                                      np.take(n, pts, axis=0), u2[sel]), None
+            # An image world or a textured emitter gives each sample its own radiance
+            # (lights.EnvironmentLight, lights.TriangleEmitter.sample_rgb), other lights None.
+            w, dist, weight, rgb = draw_light_samples(light, x, n, pts, u2[sel], rest[sel])
             weight = weight / (p_sel[sel] * k)
             live = (weight > 0) & np.isfinite(weight)
             if shadow_map is not None and shadow_map.covers(li):
@@ -324,11 +344,9 @@ def _classified_samples(groups, unshadowed, tally, shadow_map, li, light, x, n, 
         return
     p = np.repeat(pts[pen], m)
     u = sampling.stratified_2d(len(pen), m, rng).reshape(-1, 2)
+    w_m, dist_m, weight_m, rgb_m = draw_light_samples(light, x, n, p, u)
     if rgb is None:
-        w_m, dist_m, weight_m = light.sample(x[p], n[p], u)
         rgb_m = light.rgb
-    else:
-        w_m, dist_m, weight_m, rgb_m = light.sample_rgb(x[p], n[p], u)
     weight_m = weight_m / (np.repeat(p_sel[pen], m) * (k * m))
     ok = (weight_m > 0) & np.isfinite(weight_m)
     if ok.any():

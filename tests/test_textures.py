@@ -102,18 +102,23 @@ def test_a_base_colour_alone_needs_no_per_hit_lobe_inputs():
 
 
 def test_textures_read_in_batches_give_the_values_read_at_once(monkeypatch):
-    """Hits on textured materials are evaluated in batches (``bsdf.TEXTURE_BATCH``) and a
-    mesh's photons drawn in batches (``photons.EMIT_BATCH``), on a pool where one is given:
-    with batches of 7 rows, hits of two textured materials interleaved and a pool, every
-    slot and every photon is what one batch gives, bit for bit."""
+    """Hits on textured materials are evaluated in batches (``bsdf.TEXTURE_BATCH``), a
+    mesh's photons drawn in batches (``photons.EMIT_BATCH``), on a pool where one is given,
+    and light samples drawn in batches (``direct.LIGHT_SAMPLE_BATCH``): with batches of 7
+    rows, hits of two textured materials interleaved and a pool, every slot, every photon and
+    the direct light (shadow photons' penumbra resamples included) are what one batch gives,
+    bit for bit."""
     from concurrent.futures import ThreadPoolExecutor
 
-    from lanterna.engine import bsdf, photons
+    from lanterna.engine import bsdf, direct, photons
 
     panel = _panel_scene()
     panel.materials[0].emit_both_sides = True              # photons leave either side
-    scene = _scene([panel.materials[0], _textured_material("Floor", "diffuse")],
-                   panel.triangles, panel.material_ids, np.concatenate([_quad_uv()] * 2))
+    plate = quad([0.25, 0, 0.6], [0.25, 0, 0], [0, 0.6, 0])   # a shadow on the floor
+    scene = _scene([panel.materials[0], _textured_material("Floor", "diffuse"),
+                    Material("Plate", diffuse=np.full(3, 0.5))],
+                   np.concatenate([panel.triangles, plate]), [0, 0, 1, 1, 2, 2],
+                   np.concatenate([_quad_uv()] * 3))
     rng = np.random.default_rng(4)
     prim = rng.integers(0, 4, 300)
     bu, bv = rng.random(300) * 0.5, rng.random(300) * 0.5
@@ -124,13 +129,27 @@ def test_textures_read_in_batches_give_the_values_read_at_once(monkeypatch):
         with ThreadPoolExecutor(2) as pool:
             em = emit_photons(scene, 1000, sampling.rng_for(3, sampling.STREAM_PHOTON),
                               pool=pool)
-        return [getattr(hits, name) for name in names] + [em.origins, em.directions, em.power]
+        lights, accel = LightSet(scene), Accelerator(scene.triangles)
+        shadow = build_shadow_photon_map(scene, accel, lights, 20000, seed=2)
+        classes.append(shadow.classify(x, normals, 0))
+        light = direct_irradiance(x, normals, lights, accel, np.random.default_rng(5), 16,
+                                  shadow_map=shadow)
+        return [getattr(hits, name) for name in names] + [em.origins, em.directions, em.power,
+                                                          light]
 
+    g = np.linspace(-0.9, 0.9, 13)
+    x = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
+    x = np.column_stack([x, np.full(len(x), 1e-4)])               # the floor
+    normals = np.tile([0.0, 0.0, 1.0], (len(x), 1))
+    classes = []
     whole = read()
+    assert np.sum(classes[0] == LIT) >= 5 and np.sum(classes[0] == PENUMBRA) >= 5
     monkeypatch.setattr(bsdf, "TEXTURE_BATCH", 7)
     monkeypatch.setattr(photons, "EMIT_BATCH", 7)
-    for name, a, b in zip(names + ("origins", "directions", "power"), whole, read()):
+    monkeypatch.setattr(direct, "LIGHT_SAMPLE_BATCH", 7)
+    for name, a, b in zip(names + ("origins", "directions", "power", "direct"), whole, read()):
         assert np.array_equal(a, b), name
+    assert np.all(whole[-1] > 0)
     assert len(np.unique(whole[0][:, 0])) > 2 and len(np.unique(whole[3][:, 0])) > 2
 
 
