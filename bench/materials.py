@@ -52,8 +52,9 @@ Columns (``materials.csv``: one row per render; ``materials_summary.csv``: one p
     goal_met              principled_room only (yard_320 with ``--worlds``): ratio <=
                           ``GOAL_RATIO`` (0.5).
     check_256 (JSON)      issue 24's check: final's error at or below Cycles-256's and its
-                          time <= 0.5 x that render's (``check_at_samples``); the worlds'
-                          section says it per scene.
+                          time <= 0.5 x that render's (``check_at_samples``), made on the
+                          goal scene (yard_320); the worlds' section gives it for the others
+                          too, for comparison.
 
 Outputs
     ``--out`` (default ``out/materials``): ``materials.csv``, ``materials_summary.csv``,
@@ -309,7 +310,9 @@ def scene_sentence(s: dict, suite: Suite | None = None) -> str:
         why += (f"; Cycles is still at {100 * last['error']:.2f} % after "
                 f"{s['samples'][-1]} spp ({last['seconds']:.1f} s)")
     if suite.name == "worlds":
-        why += "; it " + check_text(check_at_samples(s))
+        why += ("; it " if s["scene"] == suite.goal_scene else
+                f"; for comparison only (the check is made on {suite.goal_scene}), it ")
+        why += check_text(check_at_samples(s))
     return f"**{s['scene']}**: {head}. {why}."
 
 
@@ -324,8 +327,12 @@ def section_markdown(data: dict, plot_rel: str) -> str:
     load = (f", 1-min load average {min(loads):.1f}-{max(loads):.1f} at the start and end"
             if loads else "")
     goal = (f"goal: <= {GOAL_RATIO} on the Principled room" if suite.name == "materials" else
-            f"goal: <= {GOAL_RATIO} on the yard at 320 x 240; issue 24 also asks that final reach "
-            f"Cycles-{CHECK_SAMPLES}'s error in at most {GOAL_RATIO} x its time")
+            f"goal: <= {GOAL_RATIO} on the yard at 320 x 240, {suite.goal_scene}, the scene issue "
+            f"24's check is made on too: final at Cycles-{CHECK_SAMPLES}'s error in at most "
+            f"{GOAL_RATIO} x its time. At the parity tests' 80 x 60 the set-up that both "
+            "renderers pay whatever the image's size (Cycles' 16 spp take most of its "
+            f"{CHECK_SAMPLES} spp's time there) outweighs the rendering, so the check is given "
+            "there for comparison only")
     lines = [suite.section, "",
              f"Measured {m['date']} on {m['cpu_count']} CPUs ({m['cpu']}, {m['platform']}{load}), "
              f"Blender {m.get('blender', '?')}, {data['minutes']:.0f} min. Regenerate with "
