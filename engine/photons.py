@@ -223,6 +223,18 @@ def _cosine_weighted_radiance(world, portals) -> np.ndarray:
     return np.array(out).reshape(-1, 3)
 
 
+def _in_batches(batch, n: int, pool=None) -> None:
+    """``batch(start)`` for the first rows of ``n`` rows' batches of ``EMIT_BATCH`` (each
+    batch fills its own rows), on ``pool``'s threads where one is given and there are two
+    batches or more."""
+    starts = range(0, n, EMIT_BATCH)
+    if pool is None or len(starts) < 2:
+        for start in starts:
+            batch(start)
+    else:
+        list(pool.map(batch, starts))
+
+
 def _disc_photons(world, center, radius, back, u, v, n, pool=None):
     """Photons of the world from its disc of ``radius`` [m] facing ``center``, ``back`` [m]
     behind it along each direction: origins and directions of travel (n, 3) and, for an image
@@ -249,12 +261,7 @@ def _disc_photons(world, center, radius, back, u, v, n, pool=None):
         origins[part] = center - d * back + disk[:, 0:1] * t + disk[:, 1:2] * b
         travel[part] = d
 
-    starts = range(0, n, EMIT_BATCH)
-    if pool is None or len(starts) < 2:
-        for start in starts:
-            batch(start)
-    else:
-        list(pool.map(batch, starts))
+    _in_batches(batch, n, pool)
     return origins, travel, power
 
 
@@ -395,12 +402,7 @@ def _mesh_photons(scene, tri_idx, weights, flux, u, v, flip, pool=None):
         picked = table.exitance[materials] @ LUMINANCE
         power[part] = surface.exitance / np.maximum(picked[:, None], 1e-30) * (flux @ LUMINANCE) / n
 
-    starts = range(0, n, EMIT_BATCH)
-    if pool is None or len(starts) < 2:
-        for start in starts:
-            batch(start)
-    else:
-        list(pool.map(batch, starts))
+    _in_batches(batch, n, pool)
     return origins, travel, power
 
 
