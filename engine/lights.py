@@ -485,6 +485,26 @@ def subdivide_triangles(tris: np.ndarray, segments: int):
     return corners, parent, bary
 
 
+def emitter_parts(scene, materials, triangles: np.ndarray, parts: int):
+    """The emitting triangles ``triangles`` (indices into the scene) cut into about ``parts``
+    congruent sub-triangles (``subdivide_triangles``; at least the triangles themselves), and
+    each one's mean radiance over ``TEXTURED_EMITTER_POINTS`` stratified points: (corners
+    (S, 3, 3), the scene triangle of each (S,), their corners' barycentrics in it (S, 3, 2),
+    mean radiance (S, 3) [W m^-2 sr^-1])."""
+    segments = max(1, int(np.sqrt(parts / max(len(triangles), 1))))
+    corners, parent, bary = subdivide_triangles(scene.triangles[triangles], segments)
+    k = TEXTURED_EMITTER_POINTS
+    u = sampling.square_to_triangle(sampling.stratified_2d(1, k, np.random.default_rng(0))
+                                    .reshape(-1, 2))                  # (k, 2) in a sub-triangle
+    w = np.stack([1 - u[:, 0] - u[:, 1], u[:, 0], u[:, 1]], axis=1)   # corner weights
+    points = np.einsum("kc,scd->skd", w, bary).reshape(-1, 2)         # parent barycentrics
+    parents = np.asarray(triangles)[parent]                            # scene triangle per S
+    prim = np.repeat(parents, k)
+    radiance = materials.at(scene.material_ids[prim], prim, points[:, 0],
+                            points[:, 1]).emitted_radiance
+    return corners, parents, bary, radiance.reshape(len(corners), k, 3).mean(axis=1)
+
+
 def textured_emitter(name: str, scene, materials, triangles: np.ndarray, two_sided: bool):
     """The light-sampling emitter of a mesh whose emission is textured (issue 24), or None
     where it emits nothing: its triangles (indices ``triangles`` into the scene) cut into
@@ -496,23 +516,13 @@ def textured_emitter(name: str, scene, materials, triangles: np.ndarray, two_sid
     ``sample_rgb``): the estimate is unbiased, the sub-triangles only shape its noise. One
     light, as Cycles samples a textured emissive mesh: three lights, one per colour channel,
     paid every light sample's solid angles, shadow rays and shadow photons three times."""
-    segments = max(1, int(np.sqrt(TEXTURED_EMITTER_TRIANGLES / max(len(triangles), 1))))
-    corners, parent, bary = subdivide_triangles(scene.triangles[triangles], segments)
-    k = TEXTURED_EMITTER_POINTS
-    u = sampling.square_to_triangle(sampling.stratified_2d(1, k, np.random.default_rng(0))
-                                    .reshape(-1, 2))                  # (k, 2) in a sub-triangle
-    w = np.stack([1 - u[:, 0] - u[:, 1], u[:, 0], u[:, 1]], axis=1)   # corner weights
-    points = np.einsum("kc,scd->skd", w, bary).reshape(-1, 2)         # parent barycentrics
-    prim = np.repeat(np.asarray(triangles)[parent], k)
-    mids = scene.material_ids[prim]
-    radiance = materials.at(mids, prim, points[:, 0], points[:, 1]).emitted_radiance
-    radiance = radiance.reshape(len(corners), k, 3).mean(axis=1)      # (S, 3)
+    corners, parents, _bary, radiance = emitter_parts(scene, materials, triangles,
+                                                      TEXTURED_EMITTER_TRIANGLES)
     luminance = radiance @ LUMINANCE
     brightest = int(np.argmax(luminance))
     peak = float(luminance[brightest])
     if peak <= 0:
         return None
-    parents = np.asarray(triangles)[parent]                            # scene triangle per S
     # Per sub-triangle, the linear map from a point on its scene triangle's plane to that
     # triangle's barycentrics (least squares on the plane): (bu, bv) = rows @ (p - origin).
     t = scene.triangles[parents].astype(np.float64)

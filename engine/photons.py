@@ -11,8 +11,10 @@ What it computes (seed sections 9.1-9.5, corrections in DESIGN.md §4)
         share it never delivers booked as absorbed),
         sun (a disk covering the scene's bounds), area lights (area-uniform points, cosine
         directions, Eq. 9.5; collimated ones along the normal, 9.1.2), emissive meshes
-        (triangle by area with ``searchsorted`` on cumulative areas, the seed's "area line",
-        area-uniform points, cosine directions, 9.1.3) and the world: a constant one (a
+        (triangle by area x exitance with ``searchsorted`` on cumulative weights, the seed's
+        "area line", area-uniform points, cosine directions, 9.1.3; a textured emission by
+        the power of ``PHOTON_EMITTER_TRIANGLES`` parts, ``mesh_parts``) and the world: a
+        constant one (a
         uniform direction and a point on a disk covering the scene), an image world
         (``environment.Environment``: directions from its CDF, power L / p x the disk's area
         / n, pbrt-v3 ``InfiniteAreaLight::Sample_Le``), or, with light portals, through them
@@ -64,7 +66,8 @@ import numpy as np
 
 from . import sampling
 from .accel import offset_distance
-from .lights import ENV_CDF_SHARE, LUMINANCE, PortalSet, sphere_emission_origins, spot_mask
+from .lights import (ENV_CDF_SHARE, LUMINANCE, TEXTURED_EMITTER_FLOOR, PortalSet, emitter_parts,
+                     sphere_emission_origins, spot_mask)
 from .npzjson import pack_json, unpack_json
 from .scene import MAX_COORDINATE, MAX_VALUE, AreaLight, PointLight, Scene, SpotLight, SunLight
 from .bsdf import MaterialTable, sample_glossy
@@ -73,6 +76,11 @@ from .textures import DIFFUSE_RAY
 
 EXTERIOR_SHARE = 0.25     # with portals: the world's photons from its disc, outside them
 EMIT_BATCH = 1 << 16      # sky and emissive-mesh photons drawn per batch
+# Sub-triangles (about; at least its triangles) that a mesh with a textured emission sends
+# photons from, each picked by its mean exitance (``mesh_parts``): photons then leave a panel's
+# bright spots in proportion to their power, each carrying about the same power, instead of
+# uniformly with powers as uneven as the texture (a photon map as noisy as their spread).
+PHOTON_EMITTER_TRIANGLES = 4096
 
 
 def _spread_bits(v: np.ndarray) -> np.ndarray:
@@ -136,6 +144,24 @@ def _cosine_directions(normals, u):
     return sampling.to_world(sampling.square_to_cosine_hemisphere(u), t, b, normals)
 
 
+def mesh_parts(scene, materials, emissive: np.ndarray, sides: np.ndarray):
+    """The parts that a mesh with a textured emission sends its photons from: the emitting
+    triangles ``emissive`` (with their ``sides``, 1 or 2) cut into about
+    ``PHOTON_EMITTER_TRIANGLES`` sub-triangles (``lights.emitter_parts``), each picked by
+    its area x sides x its mean exitance's luminance (floored at ``TEXTURED_EMITTER_FLOOR``
+    of the brightest's): (corners (S, 3, 3), scene triangle (S,), barycentric corners in it
+    (S, 3, 2), the luminance each is picked by (S,), pick weights (S,))."""
+    corners, parents, bary, radiance = emitter_parts(scene, materials, emissive,
+                                                     PHOTON_EMITTER_TRIANGLES)
+    luminance = np.pi * radiance @ LUMINANCE                  # mean exitance's luminance
+    luminance = np.maximum(luminance, TEXTURED_EMITTER_FLOOR * max(float(luminance.max()), 0.0))
+    e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+    areas = 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
+    per_parent = dict(zip(np.asarray(emissive).tolist(), np.asarray(sides).tolist()))
+    part_sides = np.array([per_parent[p] for p in parents.tolist()], np.float64)
+    return corners, parents, bary, luminance, areas * part_sides * luminance
+
+
 def _light_fluxes(scene: Scene, target=None):
     """(name, RGB flux [W], emitter) for every light that emits photons. ``target``: a sphere
     (center, radius [m]) inside the scene that the sun's and the world's photons are aimed
@@ -174,10 +200,12 @@ def _light_fluxes(scene: Scene, target=None):
             surface = materials.at(mids)
             sides = np.where(surface.both_sides, 2.0, 1.0)
             flux = (surface.exitance * (areas * sides)[:, None]).sum(0)
-            # Triangles are picked by their flux's luminance (textured: their material's
-            # mean exitance), each photon then carries the exitance at its own point.
+            # Triangles are picked by their flux's luminance, each photon then carries the
+            # exitance at its own point. With a textured emission, by parts (``mesh_parts``).
             picks = areas * sides * (surface.exitance @ LUMINANCE)
-            out.append(("emissive meshes", flux, ("mesh", emissive, picks, mids)))
+            parts = (mesh_parts(scene, materials, emissive, sides)
+                     if materials.textured_emission[mids].any() else None)
+            out.append(("emissive meshes", flux, ("mesh", emissive, picks, mids, parts)))
     world = scene.world
     if not world.is_black:
         total = (world.environment.integral() if world.environment is not None
@@ -328,7 +356,8 @@ def emit_photons(scene: Scene, count: int, rng: np.random.Generator,
             normal = np.broadcast_to(light.normal, (n, 3))
             d = normal.copy() if light.collimated else _cosine_directions(np.ascontiguousarray(normal), v)
         elif kind == "mesh":
-            o, d, power = _mesh_photons(scene, spec[1], spec[2], flux, u, v, rng.random(n), pool)
+            o, d, power = _mesh_photons(scene, spec[1], spec[2], flux, u, v, rng.random(n), pool,
+                                        parts=spec[4])
         elif kind == "world":
             center, radius = spec[1], spec[2]
             o, d, per_area = _disc_photons(scene.world, center, radius, spec[5], u, v, n, pool)
@@ -365,7 +394,7 @@ def emit_photons(scene: Scene, count: int, rng: np.random.Generator,
                           falloff_r2=r2 if soft else None)
 
 
-def _mesh_photons(scene, tri_idx, weights, flux, u, v, flip, pool=None):
+def _mesh_photons(scene, tri_idx, weights, flux, u, v, flip, pool=None, parts=None):
     """Photons of the emissive meshes: origins, directions of travel and powers (n, 3) for
     the stratified points ``u`` (n, 2), direction numbers ``v`` (n, 2) and side numbers
     ``flip`` (n,). A triangle of ``tri_idx`` is picked by its ``weights`` (area x sides x the
@@ -375,10 +404,15 @@ def _mesh_photons(scene, tri_idx, weights, flux, u, v, flip, pool=None):
     picked by, scaled to the meshes' ``flux`` [W]. In batches of ``EMIT_BATCH`` on ``pool``'s
     threads where one is given (each batch fills its own rows): the textured room's million
     panel photons took 0.9-1.6 s at once, their texture's temporaries in fresh memory pages
-    (0.5 s untextured)."""
+    (0.5 s untextured). ``parts`` (``mesh_parts``, for meshes with a textured emission): the
+    sub-triangles are picked instead, by their own weights, and each photon carries the
+    exitance at its point over the luminance its part was picked by, times the parts' summed
+    weight (the same estimate of the flux, unbiased whatever the parts' luminances)."""
     n = len(u)
     origins, travel, power = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
     table = MaterialTable(scene)
+    if parts is not None:
+        corners, tri_idx, corner_bary, part_luminance, weights = parts
     cdf = np.cumsum(weights)
 
     def batch(start):
@@ -390,6 +424,10 @@ def _mesh_photons(scene, tri_idx, weights, flux, u, v, flip, pool=None):
         bary = sampling.square_to_triangle(np.stack([u0, uu[:, 1]], 1))
         prim = tri_idx[pick]
         tri = scene.triangles[prim].astype(np.float64)
+        if parts is not None:                 # the point in its part, then in its triangle
+            a, b = bary[:, 0:1], bary[:, 1:2]
+            c = corner_bary[pick]
+            bary = c[:, 0] * (1 - a - b) + c[:, 1] * a + c[:, 2] * b
         o = tri[:, 0] * (1 - bary[:, 0:1] - bary[:, 1:2]) + tri[:, 1] * bary[:, 0:1] + tri[:, 2] * bary[:, 1:2]
         nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
@@ -399,6 +437,9 @@ def _mesh_photons(scene, tri_idx, weights, flux, u, v, flip, pool=None):
         travel[part] = _cosine_directions(nrm, v[part])
         # Leave the emitting surface (it is geometry too), as accel.offset_origins does.
         origins[part] = o + nrm * offset_distance(o, scene.extent)[:, None]
+        if parts is not None:
+            power[part] = surface.exitance / part_luminance[pick][:, None] * cdf[-1] / n
+            return
         picked = table.exitance[materials] @ LUMINANCE
         power[part] = surface.exitance / np.maximum(picked[:, None], 1e-30) * (flux @ LUMINANCE) / n
 

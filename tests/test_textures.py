@@ -22,7 +22,7 @@ from lanterna.engine import nodes, sampling  # noqa: E402
 from lanterna.engine.accel import Accelerator  # noqa: E402
 from lanterna.engine.bsdf import MaterialTable  # noqa: E402
 from lanterna.engine.direct import direct_irradiance  # noqa: E402
-from lanterna.engine.lights import LightSet  # noqa: E402
+from lanterna.engine.lights import LUMINANCE, LightSet  # noqa: E402
 from lanterna.engine.photons import emit_photons  # noqa: E402
 from lanterna.engine.shadow_photons import LIT, PENUMBRA, build_shadow_photon_map  # noqa: E402
 from lanterna.engine.scene import Camera, Material, Scene, World  # noqa: E402
@@ -244,6 +244,13 @@ def test_photons_leave_a_textured_emitter_by_texel_power():
     np.testing.assert_allclose(em.power.sum(axis=0), flux, rtol=0.03)
     bright = np.pi * 10.0 * TEXELS[0, 0, :3] * 0.25
     np.testing.assert_allclose(em.power[on_bright].sum(axis=0), bright, rtol=0.03)
+    # By texel power: the bright texel sends its share of the flux's luminance in photons,
+    # each of about the same power (drawn uniformly over the panel instead: a quarter of
+    # them, their powers 12 x apart).
+    share = (bright @ LUMINANCE) / (flux @ LUMINANCE)
+    assert abs(on_bright.mean() - share) < 0.02, (on_bright.mean(), share)
+    lum = em.power @ LUMINANCE
+    assert np.percentile(lum, 95) / np.percentile(lum, 5) < 1.2
 
 
 def test_a_pixels_texture_look_ups_are_one_stratified_set():
