@@ -9,7 +9,11 @@ about 10 minutes on 2 cores)
        each, two Lanterna seeds): the worst bright 4 x 4 block and the whole image's luminance.
     3. All bounces against Cycles (``tests/test_parity_cycles_gi.py``): the ``final`` preset
        and the photon map at the hit, two seeds, on every scene with a stored reference.
-    4. Which scenes tuned which parameters, and which only validate (``SCENE_ROLES``): a
+    4. Textures and HDRI worlds against Cycles (``TEXTURE_WORLD_SCENES``: issue 24's three
+       scenes and a validation scene of each kind, ``final`` at ``TEXTURE_WORLD_SEEDS``): the
+       worst bright 4 x 4 region (``tests/test_parity_materials.worst_bright_ratio``) and the
+       whole image's luminance ratio, per seed (needs bpy: the scenes are built in it).
+    5. Which scenes tuned which parameters, and which only validate (``SCENE_ROLES``): a
        parameter tuned on a scene is not validated by that scene.
 The tests assert the rules; this writes down how far inside them each figure lies.
 """
@@ -45,7 +49,35 @@ SCENE_ROLES = {
     "Cornell box, original data in mm (`tests/parity_scenes.py`)": ("validation", "nothing"),
     "furnaces and pbrt's sphere (`tests/test_analytic_modes.py`)": ("validation", "nothing"),
     "ten direct-light scenes (`tests/parity_scenes.py`)": ("validation", "nothing"),
+    "textured room (`tests/texture_scenes.py`)": ("tuning", "the textured emitter's "
+                                                  "sub-triangles for light samples "
+                                                  "(`lights.TEXTURED_EMITTER_TRIANGLES`); the "
+                                                  "texture look-ups per camera sample "
+                                                  "(`integrator.TEXTURE_SUPERSAMPLES`, on its "
+                                                  "floor's sharpness)"),
+    "textured gallery (`tests/texture_scenes.py`)": ("validation", "nothing"),
+    "HDRI yard (`tests/world_scenes.py`)": ("tuning", "leaving the sky outside the sun's "
+                                            "patches to the final gather "
+                                            "(`lights.EnvironmentLight.gather_sky`, chosen "
+                                            "on its error)"),
+    "window room with a portal (`tests/world_scenes.py`)": ("tuning", "the world's photons "
+                                                            "outside the portals "
+                                                            "(`photons.EXTERIOR_SHARE`) and "
+                                                            "the portals' share of light "
+                                                            "samples (`lights.PORTAL_SHIFT`)"),
+    "HDRI court (`tests/world_scenes.py`)": ("validation", "nothing"),
 }
+
+# Section 4 (issue 24): (builder module in tests/, scene, reference folder in tests/data/,
+# the issue's bound on the worst bright region, role).
+TEXTURE_WORLD_SCENES = (
+    ("texture_scenes", "textured_room", "cycles_materials", 0.02, "issue 24's scene"),
+    ("texture_scenes", "textured_gallery", "cycles_materials", 0.02, "validation"),
+    ("world_scenes", "yard", "cycles_world", 0.02, "issue 24's scene"),
+    ("world_scenes", "court", "cycles_world", 0.02, "validation"),
+    ("world_scenes", "window_room", "cycles_world", 0.03, "issue 24's scene"),
+)
+TEXTURE_WORLD_SEEDS = (1, 2)
 
 
 def _tests_on_path():
@@ -132,7 +164,34 @@ def gi_parity() -> list[dict]:
     return rows
 
 
-def write(path: Path, analytic_rows, direct_rows, gi_rows, seeds: int, minutes: float) -> None:
+def texture_world_parity() -> list[dict]:
+    """Section 4: issue 24's scenes and their validation scenes against their references."""
+    _tests_on_path()
+    import importlib
+
+    from test_parity_materials import render_against_reference, worst_bright_ratio
+
+    rows = []
+    for module, name, folder, bound, role in TEXTURE_WORLD_SCENES:
+        builders = importlib.import_module(module)
+        worst, whole, seconds = [], [], []
+        for seed in TEXTURE_WORLD_SEEDS:
+            t0 = time.perf_counter()
+            image, ref = render_against_reference(name, seed, builders,
+                                                  TESTS / "data" / folder)
+            seconds.append(time.perf_counter() - t0)
+            worst.append(worst_bright_ratio(image, ref))
+            whole.append(float((image.reshape(-1, 3) @ LUMA).sum()
+                               / (ref["image"].reshape(-1, 3) @ LUMA).sum()))
+            print(f"  {name} seed {seed}: worst {100 * worst[-1]:.2f} %", file=sys.stderr,
+                  flush=True)
+        rows.append({"scene": name, "role": role, "bound": bound, "worst": worst,
+                     "whole": whole, "seconds": float(np.mean(seconds))})
+    return rows
+
+
+def write(path: Path, analytic_rows, direct_rows, gi_rows, seeds: int, minutes: float,
+          texture_world_rows=()) -> None:
     today = datetime.date.today().isoformat()
     pct = lambda v: f"{100 * v:+.2f} %"                                    # noqa: E731
     lines = [
@@ -167,6 +226,23 @@ def write(path: Path, analytic_rows, direct_rows, gi_rows, seeds: int, minutes: 
     for r in gi_rows:
         lines.append(f"| {r['scene']} | {r['method']} | {pct(r['worst'])} | {pct(r['whole'])} "
                      f"| {r['seconds']:.1f} |")
+    if texture_world_rows:
+        seeds_text = " / ".join(str(v) for v in TEXTURE_WORLD_SEEDS)
+        lines += ["", "## Textures and HDRI worlds against Cycles (issue 24)", "",
+                  "`final` against the all-bounce Cycles references of "
+                  "`tests/data/make_material_refs.py` and `make_world_refs.py` (64 bounces, no "
+                  "clamping, no denoiser): the worst bright 4 × 4 region's mean luminance "
+                  "(regions over a tenth of the brightest) and the whole image's, per seed. "
+                  "Issue 24's scenes are asserted by `tests/test_parity_textures.py` and "
+                  "`tests/test_parity_world.py` at seed 1; the validation scenes shaped "
+                  "nothing (below).", "",
+                  f"| scene | role | bound | worst bright region, seeds {seeds_text} | "
+                  "whole image | seconds per render |", "|---|---|---|---|---|---|"]
+        for r in texture_world_rows:
+            worst = " / ".join(f"{100 * v:.2f} %" for v in r["worst"])
+            whole = " / ".join(f"{v:.4f}" for v in r["whole"])
+            lines.append(f"| {r['scene']} | {r['role']} | {100 * r['bound']:.0f} % | {worst} "
+                         f"| {whole} | {r['seconds']:.1f} |")
     lines += ["", "## Tuning scenes and validation scenes", "",
               "A parameter tuned on a scene is not validated by that scene.", "",
               "| scene | role | tuned on it |", "|---|---|---|"]
@@ -185,8 +261,9 @@ def main(argv=None) -> int:
     rows_a = analytic(max(1, args.seeds))
     rows_d = direct_parity()
     rows_g = gi_parity()
+    rows_t = texture_world_parity()
     write(Path(args.out), rows_a, rows_d, rows_g, max(1, args.seeds),
-          (time.perf_counter() - t0) / 60)
+          (time.perf_counter() - t0) / 60, rows_t)
     print(f"wrote {args.out}")
     return 0
 

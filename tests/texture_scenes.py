@@ -18,6 +18,19 @@ of the ``ROOM_COLOURS``, black world):
       Color is a third image (``PANEL_IMAGE``: 16 x 16 px, 8-bit sRGB, a smooth ramp from
       0.25 to 1 along x and a band of 0.5 along y) at Emission Strength ``PANEL_STRENGTH``
       (10), Base Color 0.8.
+``textured_gallery`` (:func:`textured_gallery`), a validation scene: nothing was tuned on it
+    (``textured_room`` chose the textured emitter's sub-triangles and the texture look-ups per
+    camera sample). The same room seen from its other side (camera at (1.8, 2.6, 1.9)
+    looking at (-0.6, -1.2, 0.6), 70 deg), the cube elsewhere (at (-0.9, -0.5), turned
+    -20 deg):
+    * the floor's Base Color is ``GALLERY_FLOOR_IMAGE`` (48 x 48 px, 8-bit sRGB, diagonal
+      stripes of ``GALLERY_STRIPES``) through UV -> Mapping (scale 2 x 2, rotation z 30 deg)
+      with Cubic interpolation, Repeat;
+    * the left wall's Base Color is the back wall's band image of ``textured_room`` through
+      Generated coordinates (Linear, Extend);
+    * the panel's Emission Color is ``GALLERY_PANEL_IMAGE`` (8 x 8 px, 8-bit sRGB: a dim
+      0.15 field with two bright 2 x 2 texel spots, one warm and one cold), Closest
+      interpolation, at Emission Strength ``GALLERY_PANEL_STRENGTH`` (14).
 ``plain_room`` (:func:`plain_room`)
     The same, but the floor's Base Color is one colour: ``floor_mean_albedo()``, the mean of
     the floor image's texels in linear RGB (what the textured floor reflects on average). The
@@ -39,6 +52,9 @@ FLOOR_GROUT = 0.6                 # the grout texels are the cell colour x this
 FLOOR_TILES = 3.0
 WALL_COLOURS = ((0.75, 0.35, 0.25), (0.90, 0.85, 0.70), (0.25, 0.45, 0.70), (0.55, 0.60, 0.30))
 FLOOR_IMAGE, WALL_IMAGE, PANEL_IMAGE = "FloorChecker", "WallBands", "PanelRamp"
+GALLERY_STRIPES = ((0.80, 0.72, 0.55), (0.35, 0.30, 0.45), (0.60, 0.75, 0.65))
+GALLERY_FLOOR_IMAGE, GALLERY_PANEL_IMAGE = "GalleryStripes", "GallerySpots"
+GALLERY_PANEL_STRENGTH = 14.0
 
 __all__ = ["TEXTURE_SCENES", "FLOOR_COLOURS", "FLOOR_TILES", "WALL_COLOURS", "floor_texels",
            "floor_mean_albedo", "build"]
@@ -138,12 +154,70 @@ def textured_room():
     return _build(True)
 
 
+def _gallery_floor_texels() -> np.ndarray:
+    size = 48
+    j, i = np.mgrid[0:size, 0:size]
+    band = ((i + j) // 8) % len(GALLERY_STRIPES)
+    rgb = np.asarray(GALLERY_STRIPES)[band]
+    return np.concatenate([rgb, np.ones((size, size, 1))], axis=2)
+
+
+def _gallery_panel_texels() -> np.ndarray:
+    size = 8
+    rgb = np.full((size, size, 3), 0.15)
+    rgb[1:3, 1:3] = (1.0, 0.85, 0.6)                        # a warm spot
+    rgb[5:7, 4:6] = (0.6, 0.8, 1.0)                         # a cold one
+    return np.concatenate([rgb, np.ones((size, size, 1))], axis=2)
+
+
+def _mapped_image(mat, coordinate, image, interpolation, extension="REPEAT", scale=None,
+                  rot_z_deg=0.0):
+    """Feed ``mat``'s Base Color from ``image`` through Texture Coordinate ``coordinate``
+    (and a Mapping of ``scale`` and rotation about z where given)."""
+    tree = mat.node_tree
+    coords = tree.nodes.new("ShaderNodeTexCoord")
+    tex = tree.nodes.new("ShaderNodeTexImage")
+    tex.image, tex.interpolation, tex.extension = image, interpolation, extension
+    vector = coords.outputs[coordinate]
+    if scale is not None:
+        mapping = tree.nodes.new("ShaderNodeMapping")
+        mapping.inputs["Scale"].default_value = (*scale, 1.0)
+        mapping.inputs["Rotation"].default_value = (0.0, 0.0, np.radians(rot_z_deg))
+        tree.links.new(vector, mapping.inputs["Vector"])
+        vector = mapping.outputs["Vector"]
+    tree.links.new(vector, tex.inputs["Vector"])
+    tree.links.new(tex.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Base Color"])
+    return mat
+
+
+def textured_gallery():
+    """The validation scene of the module docstring: other images, mappings, interpolations
+    and emission spots, from another viewpoint."""
+    scene = ms._reset()
+    mats = {k: ms._principled(k.title(), c) for k, c in ms.ROOM_COLOURS.items()}
+    _mapped_image(mats["floor"], "UV", _image(GALLERY_FLOOR_IMAGE, _gallery_floor_texels()),
+                  "Cubic", scale=(2.0, 2.0), rot_z_deg=30.0)
+    _mapped_image(mats["left"], "Generated", _image(WALL_IMAGE, _wall_texels()), "Linear",
+                  extension="EXTEND")
+    panel = _textured_principled("Panel", _image(GALLERY_PANEL_IMAGE, _gallery_panel_texels()),
+                                 "Closest", socket="Emission Color",
+                                 Emission_Strength=GALLERY_PANEL_STRENGTH)
+    ms._room(mats, hole=(ms.PANEL_SIZE / 2, panel))
+    _uv(bpy.data.objects["Floor"], [(0, 0), (1, 0), (1, 1), (0, 1)])
+    _uv(bpy.data.objects["Panel"], [(0, 0), (0, 1), (1, 1), (1, 0)])
+    cube = bpy.data.materials.new("Material")
+    ms._box("Cube", 1.6, (-0.9, -0.5), -20.0, cube)
+    ms._camera(scene, (1.8, 2.6, 1.9), (-0.6, -1.2, 0.6), 70.0)
+    return scene
+
+
 def plain_room():
     """``textured_room`` with the floor's image replaced by its mean colour."""
     return _build(False)
 
 
-TEXTURE_SCENES = {"textured_room": textured_room, "plain_room": plain_room}
+TEXTURE_SCENES = {"textured_room": textured_room, "plain_room": plain_room,
+                  "textured_gallery": textured_gallery}
 
 
 def build(name: str):

@@ -14,6 +14,12 @@ image by ``ROOM_MAPPING_Z_DEG`` so that the sun shines through its window.
 ``yard``: a 16 x 16 m grey ground plane (0.5), two boxes (0.7 and 0.4) and an overhang (a
 2.4 x 1.6 m slab 1.2 m up on two posts, 0.6) casting a sky-only shadow; camera at
 (6, -7, 4.5) looking at (0, 0, 0.5), 60 deg, 80 x 60 px. ``yard_320``: the same at 320 x 240.
+``court``, a validation scene (nothing was tuned on it; the yard chose how the sky is shared
+between light samples and the final gather, the window room the share of sky photons outside
+the portals): the image turned by ``COURT_MAPPING_Z_DEG`` (the sun from another side), a
+12 x 12 m ground of (0.35, 0.40, 0.30), an L of two walls 2 m high (0.75), a pillar (0.5)
+and a low bench (0.3, 0.3, 0.6) in the walls' shadow; camera at (-6, 5, 3.5) looking at
+(0.5, -0.5, 0.8), 65 deg, 80 x 60 px.
 ``window_room``: a closed 4 x 4 x 2.6 m room (walls 0.7), a 1.2 x 1.0 m window in the wall
 at y = -2, lit only by the HDRI through it; a portal area light fills the window; the camera
 inside looks at the floor patch the sun reaches.
@@ -39,6 +45,7 @@ SUN_ELEVATION_DEG = 40.0
 SUN_AZIMUTH_DEG = 20.0
 MAPPING_Z_DEG = 35.0
 ROOM_MAPPING_Z_DEG = 90.0   # the room's sun: azimuth -70 deg, through its south window
+COURT_MAPPING_Z_DEG = 160.0
 STRENGTH = 1.0
 RESOLUTION = (80, 60)
 BENCH_RESOLUTION = (320, 240)
@@ -158,6 +165,23 @@ def window_room():
     return scene
 
 
+def court():
+    scene = _ps._reset()
+    scene.render.resolution_x, scene.render.resolution_y = RESOLUTION
+    _hdri_world(scene, COURT_MAPPING_Z_DEG)
+    _ps._mesh_object("Ground", [(-6, -6, 0), (6, -6, 0), (6, 6, 0), (-6, 6, 0)],
+                     [(0, 1, 2, 3)], _ps._material_diffuse("Ground", (0.35, 0.40, 0.30)))
+    wall = _ps._material_diffuse("Wall", (0.75, 0.75, 0.75))
+    _block("WallX", (-1.5, 1.0, 0.0), (2.5, 1.25, 2.0), wall)
+    _block("WallY", (2.25, -2.0, 0.0), (2.5, 1.0, 2.0), wall)
+    _block("Pillar", (-0.9, -1.6, 0.0), (-0.5, -1.2, 2.4),
+           _ps._material_diffuse("Pillar", (0.5, 0.5, 0.5)))
+    _block("Bench", (0.6, 0.1, 0.0), (1.9, 0.6, 0.45),
+           _ps._material_diffuse("Bench", (0.3, 0.3, 0.6)))
+    _camera(scene, (-6.0, 5.0, 3.5), (0.5, -0.5, 0.8), 65.0)
+    return scene
+
+
 def yard_320():
     """The yard at ``BENCH_RESOLUTION``: the benchmark's picture (``lanterna bench --materials
     --worlds``), where the set-up that every render pays (the scene, the photon map) no longer
@@ -167,7 +191,8 @@ def yard_320():
     return scene
 
 
-WORLD_SCENES = {"yard": yard, "window_room": window_room, "yard_320": yard_320}
+WORLD_SCENES = {"yard": yard, "window_room": window_room, "yard_320": yard_320,
+                "court": court}
 
 
 def build(name: str):

@@ -36,7 +36,7 @@ import world_scenes as ws  # noqa: E402
 OUT = HERE / "cycles_world"
 GRID = (4, 4)
 SEEDS = (1, 2, 3, 4)
-SAMPLES = {"yard": 512, "window_room": 2048, "yard_320": 1024}
+SAMPLES = {"yard": 512, "window_room": 2048, "yard_320": 1024, "court": 512}
 
 
 def make_reference(name, tmpdir, out, samples=None, seeds=SEEDS):
