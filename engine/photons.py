@@ -146,20 +146,19 @@ def _cosine_directions(normals, u):
 
 def mesh_parts(scene, materials, emissive: np.ndarray, sides: np.ndarray):
     """The parts that a mesh with a textured emission sends its photons from: the emitting
-    triangles ``emissive`` (with their ``sides``, 1 or 2) cut into about
-    ``PHOTON_EMITTER_TRIANGLES`` sub-triangles (``lights.emitter_parts``), each picked by
-    its area x sides x its mean exitance's luminance (floored at ``TEXTURED_EMITTER_FLOOR``
-    of the brightest's): (corners (S, 3, 3), scene triangle (S,), barycentric corners in it
-    (S, 3, 2), the luminance each is picked by (S,), pick weights (S,))."""
+    triangles ``emissive`` (ascending scene indices, with their ``sides``, 1 or 2) cut into
+    about ``PHOTON_EMITTER_TRIANGLES`` sub-triangles (``lights.emitter_parts``), each picked
+    by its area x sides x its mean exitance's luminance (floored at
+    ``TEXTURED_EMITTER_FLOOR`` of the brightest's): (scene triangle (S,), the part's corners'
+    barycentrics in it (S, 3, 2), the luminance each is picked by (S,), pick weights (S,))."""
     corners, parents, bary, radiance = emitter_parts(scene, materials, emissive,
                                                      PHOTON_EMITTER_TRIANGLES)
     luminance = np.pi * radiance @ LUMINANCE                  # mean exitance's luminance
     luminance = np.maximum(luminance, TEXTURED_EMITTER_FLOOR * max(float(luminance.max()), 0.0))
     e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
     areas = 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
-    per_parent = dict(zip(np.asarray(emissive).tolist(), np.asarray(sides).tolist()))
-    part_sides = np.array([per_parent[p] for p in parents.tolist()], np.float64)
-    return corners, parents, bary, luminance, areas * part_sides * luminance
+    part_sides = np.asarray(sides, np.float64)[np.searchsorted(emissive, parents)]
+    return parents, bary, luminance, areas * part_sides * luminance
 
 
 def _light_fluxes(scene: Scene, target=None):
@@ -412,7 +411,7 @@ def _mesh_photons(scene, tri_idx, weights, flux, u, v, flip, pool=None, parts=No
     origins, travel, power = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
     table = MaterialTable(scene)
     if parts is not None:
-        corners, tri_idx, corner_bary, part_luminance, weights = parts
+        tri_idx, corner_bary, part_luminance, weights = parts
     cdf = np.cumsum(weights)
 
     def batch(start):
