@@ -204,7 +204,8 @@ def _light_fluxes(scene: Scene, target=None):
             picks = areas * sides * (surface.exitance @ LUMINANCE)
             parts = (mesh_parts(scene, materials, emissive, sides)
                      if materials.textured_emission[mids].any() else None)
-            out.append(("emissive meshes", flux, ("mesh", emissive, picks, mids, parts)))
+            out.append(("emissive meshes", flux,
+                        ("mesh", emissive, picks, mids, parts, materials)))
     world = scene.world
     if not world.is_black:
         total = (world.environment.integral() if world.environment is not None
@@ -355,8 +356,8 @@ def emit_photons(scene: Scene, count: int, rng: np.random.Generator,
             normal = np.broadcast_to(light.normal, (n, 3))
             d = normal.copy() if light.collimated else _cosine_directions(np.ascontiguousarray(normal), v)
         elif kind == "mesh":
-            o, d, power = _mesh_photons(scene, spec[1], spec[2], flux, u, v, rng.random(n), pool,
-                                        parts=spec[4])
+            o, d, power = _mesh_photons(scene, spec[5], spec[1], spec[2], flux, u, v,
+                                        rng.random(n), pool, parts=spec[4])
         elif kind == "world":
             center, radius = spec[1], spec[2]
             o, d, per_area = _disc_photons(scene.world, center, radius, spec[5], u, v, n, pool)
@@ -393,10 +394,10 @@ def emit_photons(scene: Scene, count: int, rng: np.random.Generator,
                           falloff_r2=r2 if soft else None)
 
 
-def _mesh_photons(scene, tri_idx, weights, flux, u, v, flip, pool=None, parts=None):
+def _mesh_photons(scene, table, tri_idx, weights, flux, u, v, flip, pool=None, parts=None):
     """Photons of the emissive meshes: origins, directions of travel and powers (n, 3) for
     the stratified points ``u`` (n, 2), direction numbers ``v`` (n, 2) and side numbers
-    ``flip`` (n,). A triangle of ``tri_idx`` is picked by its ``weights`` (area x sides x the
+    ``flip`` (n,), their materials read through ``table`` (``_light_fluxes``' own). A triangle of ``tri_idx`` is picked by its ``weights`` (area x sides x the
     luminance of its material's mean exitance), an area-uniform point on it, a cosine
     direction about its normal (either side of a two-sided emitter, ``flip`` < 1/2 the back);
     each photon carries the exitance at its own point over the luminance its triangle was
@@ -409,7 +410,6 @@ def _mesh_photons(scene, tri_idx, weights, flux, u, v, flip, pool=None, parts=No
     weight (the same estimate of the flux, unbiased whatever the parts' luminances)."""
     n = len(u)
     origins, travel, power = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
-    table = MaterialTable(scene)
     if parts is not None:
         tri_idx, corner_bary, part_luminance, weights = parts
     cdf = np.cumsum(weights)
