@@ -31,6 +31,13 @@ from .sampling import dot_rows, scale_rows
 
 MISS = -1
 OFFSET_SCALE = 2e-5
+# ``Accelerator.disc_coverage``: directions probed per disc, the height of its probes in
+# offsets, how far from the disc's plane a surface must turn to end it (cos 45 deg), and the
+# least share it reports (a disc centred on a right-angled corner).
+COVERAGE_DIRECTIONS = 8
+COVERAGE_PROBE_OFFSETS = 4
+COVERAGE_EDGE_COS = 0.7071
+COVERAGE_MIN = 0.25
 
 
 def offset_distance(points: np.ndarray, extent: float) -> np.ndarray:
@@ -146,6 +153,54 @@ class Accelerator:
         self.trace_seconds += time.perf_counter() - start
         self.rays_traced += n
         return blocked
+
+    def disc_coverage(self, points: np.ndarray, normals: np.ndarray, radius: np.ndarray,
+                      directions: int = COVERAGE_DIRECTIONS) -> np.ndarray:
+        """The share (N,) of the disc of ``radius`` [m] about each point, in its tangent plane
+        (unit ``normals``), that its own surface covers: 1 inside a face, about 1/2 on an
+        edge, 1/4 in a right-angled corner (at least ``COVERAGE_MIN``). In ``directions``
+        directions d_j (a per-point rotation from the point's coordinates, so the answer
+        does not depend on batching) two rays run parallel to the plane, just above and just
+        below it (``COVERAGE_PROBE_OFFSETS`` offsets): the first surface they meet within the
+        radius that turns more than 45 deg from the plane ends the disc there (above: a wall
+        rising from a floor; below: the inside of a solid past its convex edge); the share is
+        the polar area sum_j min(t_j, r)^2 / (D r^2). Coplanar neighbours and gently curved
+        surfaces do not end it; an open edge (a sheet ending in air) is not seen."""
+        x = np.asarray(points, np.float64).reshape(-1, 3)
+        n = np.asarray(normals, np.float64).reshape(-1, 3)
+        r = np.asarray(radius, np.float64).reshape(-1)
+        count, d = len(x), int(directions)
+        share = np.ones(count)
+        if count == 0 or self._embree is None:
+            return share
+        # A tangent frame per point, turned by a hash of its coordinates.
+        helper = np.where(np.abs(n[:, 0:1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+        t1 = np.cross(n, helper)
+        t1 /= np.maximum(np.linalg.norm(t1, axis=1, keepdims=True), 1e-300)
+        t2 = np.cross(n, t1)
+        turn = np.modf(np.abs(np.sin(x @ np.array([12.9898, 78.233, 37.719])) * 43758.5453))[0]
+        phi = 2.0 * np.pi * (np.arange(d)[None, :] + turn[:, None]) / d            # (N, D)
+        ways = (np.cos(phi)[..., None] * t1[:, None, :]
+                + np.sin(phi)[..., None] * t2[:, None, :]).reshape(-1, 3)          # (N D, 3)
+        lift = (COVERAGE_PROBE_OFFSETS * self.offset_distance(x))[:, None] * n     # (N, 3)
+        reach = np.repeat(r, d)
+        ends = np.repeat(r, d)
+        tri = self.triangles.astype(np.float64)
+        for side in (1.0, -1.0):
+            origins = np.repeat(x + side * lift, d, axis=0)
+            t, prim, _u, _v = self.intersect(origins, ways, reach)
+            hit = np.flatnonzero((prim >= 0) & (t < reach))
+            if len(hit) == 0:
+                continue
+            corners = tri[prim[hit]]
+            face = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+            face /= np.maximum(np.linalg.norm(face, axis=1, keepdims=True), 1e-300)
+            turned = np.abs(dot_rows(face, np.repeat(n, d, axis=0)[hit])) < COVERAGE_EDGE_COS
+            hit = hit[turned]
+            ends[hit] = np.minimum(ends[hit], t[hit])
+        safe_r = np.where(r > 0, r, 1.0)
+        share = ((ends.reshape(count, d) / safe_r[:, None]) ** 2).mean(axis=1)
+        return np.where(r > 0, np.clip(share, COVERAGE_MIN, 1.0), 1.0)
 
     # Geometry helpers -----------------------------------------------------------------------
     def offset_distance(self, points: np.ndarray) -> np.ndarray:

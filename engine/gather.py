@@ -102,11 +102,13 @@ class RadianceEstimates:
 
     @classmethod
     def build(cls, photon_map, k: int = 50, max_radius: float = np.inf, fraction: float = 0.25,
-              max_estimates: int = 400_000, pool=None, seed: int = 0) -> "RadianceEstimates":
+              max_estimates: int = 400_000, pool=None, seed: int = 0,
+              coverage=None) -> "RadianceEstimates":
         """Estimates at every 1/``fraction``-th photon of ``photon_map`` (which must hold all
         photons, direct and indirect: a gather ray's landing point reflects both), in chunks
         on ``pool``. The photons are in Morton order, so a regular stride spreads the
-        estimates evenly over the surfaces."""
+        estimates evenly over the surfaces. ``coverage``: the share of each estimate's disc
+        that its surface covers (``PhotonMap.irradiance``; ``Accelerator.disc_coverage``)."""
         t0 = time.perf_counter()
         total = len(photon_map)
         wanted = int(min(max_estimates, max(1, round(total * fraction)))) if total else 0
@@ -124,7 +126,7 @@ class RadianceEstimates:
         def estimate(c):
             counters = {}                    # one per chunk: the pool's threads share none
             e = photon_map.irradiance(positions[c], normals[c], k=k, max_radius=max_radius,
-                                      stats=counters)
+                                      stats=counters, coverage=coverage)
             return e, counters
 
         parts = list(pool.map(estimate, chunks)) if pool is not None else [estimate(c) for c in chunks]

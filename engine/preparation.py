@@ -217,7 +217,7 @@ def _photons(prep: Prepared, scene, settings, tell, cancelled, artifacts):
     else:
         tell(0.0, "Precomputing irradiance at photons")
         estimates = RadianceEstimates.build(pmap, k=settings.photon_k, max_radius=radius,
-                                            pool=pool)
+                                            pool=pool, coverage=prep.accel.disc_coverage)
         strand_stats = {}
         if scene.strands is not None:          # hair: estimates of their own
             estimates.strands = StrandEstimates.build(pmap, prep.accel, scene.triangles,
