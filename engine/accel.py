@@ -5,11 +5,18 @@ What it computes
     the closest hit (distance, triangle index, barycentrics) or whether anything blocks the
     segment. Rays are split into chunks traced on a thread pool: embreex releases the GIL
     while it traces, so both cores work.
+    ``disc_coverage(points, normals, radius)``: the share of each point's tangent disc that
+    its surface covers, probed by rays parallel to it (the photon estimate's edge correction,
+    ``PhotonMap.irradiance``).
 
 Parameters
     ``triangles``  (T, 3, 3) float32 world-space corners [m].
     ``threads``    worker threads (default: all cores).
     ``chunk``      rays per Embree call (default 65 536).
+    ``COVERAGE_DIRECTIONS`` (8) directions a disc is probed in; ``COVERAGE_PROBE_OFFSETS``
+    (4) the probes' height over and under the surface, in self-intersection offsets;
+    ``COVERAGE_EDGE_COS`` (0.7071) a surface met that turns more than 45 deg from the disc
+    ends it; ``COVERAGE_MIN`` (0.25) the least share reported (a right-angled corner).
 
 Self-intersection
     embreex starts every ray at t = 0, so a secondary ray's origin is pushed off its surface

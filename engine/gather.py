@@ -6,8 +6,11 @@ What it computes
         the photon positions, each with its surface normal; a kd-tree over them. A gather ray
         that lands on a diffuse surface then needs one nearest-neighbour look-up instead of a
         k-photon estimate: reflected radiance L = rho_d / pi * E of the nearest precomputed
-        point whose normal agrees (n . n_i > 0.5). Christensen reports 5-7x faster final
-        gathering; the blur it adds is hidden behind the gather's own averaging.
+        point whose normal agrees (n . n_i > 0.5). The estimates divide by the part of their
+        disc that their surface covers (``coverage``: ``Accelerator.disc_coverage``), so
+        that gather rays that land by an edge or in a corner do not read it too dark.
+        Christensen reports 5-7x faster final gathering; the blur it adds is hidden behind
+        the gather's own averaging.
     ``StrandEstimates.build(photon_map, accel, triangles, strands)``  the same on hair
         (``Scene.strands``), where the surface estimate fails: the flux landing on strands
         in a sphere over the strands' own area in it, with the light's direction (its
@@ -73,6 +76,7 @@ from .textures import DIFFUSE_RAY, ray_after_bounce
 ROULETTE_WEIGHT = 0.5      # continuations of smaller weight go on by Russian roulette
 
 LOOKUP_NEIGHBOURS = 4       # nearest estimates inspected for one with an agreeing normal
+WIDE_LOOKUP_NEIGHBOURS = 32  # ... and, where none of those agrees, this many
 DISC_THICKNESS = 0.25       # a look-up's disc, as the photon estimate's (photons.py)
 GUIDE_PHOTONS = 128         # nearby photons whose directions steer a guided gather
 GATHER_RAYS_PER_CALL = 1 << 19   # rays in flight per chunk of final_gather (~150 B a ray)
@@ -158,8 +162,8 @@ class RadianceEstimates:
 
     def surface_lookup(self, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
         """Irradiance (N, 3) of the nearest estimate whose normal agrees with ``normals``
-        (n . n_i > 0.5) among the ``LOOKUP_NEIGHBOURS`` nearest; 0 where none does. With a
-        finite ``max_radius`` only estimates within it and within ``DISC_THICKNESS`` x it of
+        (n . n_i > 0.5) among the ``LOOKUP_NEIGHBOURS`` nearest, then among the
+        ``WIDE_LOOKUP_NEIGHBOURS`` nearest; 0 where none does. With a finite ``max_radius`` only estimates within it and within ``DISC_THICKNESS`` x it of
         the point's tangent plane count, as photons in the estimate's disc (Fig. 9.5): a
         surface without photons nearby (the floor under a closed lamp shade) must not take
         the irradiance of the far side of a shell."""
@@ -195,6 +199,19 @@ class RadianceEstimates:
             rows = np.arange(len(rest))
             found = ok[rows, first]
             out[rest[found]] = np.take(self.irradiance, others[rows, first][found], axis=0)
+            # By a corner the nearest few may all lie on the other surface (a bright floor's
+            # estimates crowd round the foot of a dim wall): look further before giving 0.
+            wide = int(min(WIDE_LOOKUP_NEIGHBOURS, len(self)))
+            still = rest[~found]
+            if len(still) and wide > kk:
+                others = nearest(np.ascontiguousarray(pts32[still]), wide)[:, kk:]
+                cols = others.shape[1]
+                ok = self._agrees(others.reshape(-1), np.repeat(pts32[still], cols, axis=0),
+                                  np.repeat(nrm[still], cols, axis=0), bounded).reshape(-1, cols)
+                first = np.argmax(ok, axis=1)
+                rows = np.arange(len(still))
+                found = ok[rows, first]
+                out[still[found]] = np.take(self.irradiance, others[rows, first][found], axis=0)
         return out
 
     def _agrees(self, idx, points32, normals32, bounded: bool) -> np.ndarray:
