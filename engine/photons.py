@@ -170,11 +170,37 @@ def mesh_parts(scene, materials, emissive: np.ndarray, sides: np.ndarray):
     return parents, bary, luminance, areas * part_sides * luminance
 
 
-def _light_fluxes(scene: Scene, target=None):
+def emissive_meshes(scene: Scene, materials: MaterialTable | None = None) -> list:
+    """``_light_fluxes``' entry for the scene's emissive triangles, in a list (empty when
+    none emits): ("emissive meshes", RGB flux [W], ("mesh", triangles, pick weights,
+    material ids, ``mesh_parts`` or None, the MaterialTable)). ``materials``: the scene's
+    ``MaterialTable`` when the caller has one."""
+    if not len(scene.triangles):
+        return []
+    materials = MaterialTable(scene) if materials is None else materials
+    emissive = np.nonzero(materials.is_emissive[scene.material_ids])[0]
+    if not len(emissive):
+        return []
+    areas = scene.triangle_areas()[emissive]
+    mids = scene.material_ids[emissive]
+    surface = materials.at(mids)
+    sides = np.where(surface.both_sides, 2.0, 1.0)
+    flux = (surface.exitance * (areas * sides)[:, None]).sum(0)
+    # Triangles are picked by their flux's luminance, each photon then carries the exitance
+    # at its own point. With a textured emission, by parts (``mesh_parts``).
+    picks = areas * sides * (surface.exitance @ LUMINANCE)
+    parts = (mesh_parts(scene, materials, emissive, sides)
+             if materials.textured_emission[mids].any() else None)
+    return [("emissive meshes", flux, ("mesh", emissive, picks, mids, parts, materials))]
+
+
+def _light_fluxes(scene: Scene, target=None, meshes: list | None = None):
     """(name, RGB flux [W], emitter) for every light that emits photons. ``target``: a sphere
     (center, radius [m]) inside the scene that the sun's and the world's photons are aimed
     at (a disc of its radius across their direction, starting outside the scene), instead of
-    the scene's bounding sphere: their flux is then that through the sphere's disc."""
+    the scene's bounding sphere: their flux is then that through the sphere's disc.
+    ``meshes``: ``emissive_meshes(scene)`` when the caller has it (a render's photon passes
+    share one: its textured parts cost 35 ms, its MaterialTable 22 ms on the textured room)."""
     out = []
     lo, hi = scene.bounds()
     center, radius = (lo + hi) / 2, max(np.linalg.norm(hi - lo) / 2, 1e-9)
@@ -199,22 +225,7 @@ def _light_fluxes(scene: Scene, target=None):
                         ("sun", light, center, radius, back)))
         elif isinstance(light, AreaLight):
             out.append((light.name, light.power, ("area", light)))
-    materials = MaterialTable(scene)
-    if len(scene.triangles):
-        emissive = np.nonzero(materials.is_emissive[scene.material_ids])[0]
-        if len(emissive):
-            areas = scene.triangle_areas()[emissive]
-            mids = scene.material_ids[emissive]
-            surface = materials.at(mids)
-            sides = np.where(surface.both_sides, 2.0, 1.0)
-            flux = (surface.exitance * (areas * sides)[:, None]).sum(0)
-            # Triangles are picked by their flux's luminance, each photon then carries the
-            # exitance at its own point. With a textured emission, by parts (``mesh_parts``).
-            picks = areas * sides * (surface.exitance @ LUMINANCE)
-            parts = (mesh_parts(scene, materials, emissive, sides)
-                     if materials.textured_emission[mids].any() else None)
-            out.append(("emissive meshes", flux,
-                        ("mesh", emissive, picks, mids, parts, materials)))
+    out += emissive_meshes(scene) if meshes is None else meshes
     world = scene.world
     if not world.is_black:
         total = (world.environment.integral() if world.environment is not None
@@ -236,9 +247,9 @@ def _light_fluxes(scene: Scene, target=None):
     return out
 
 
-def _photon_lights(scene: Scene, target=None) -> list:
+def _photon_lights(scene: Scene, target=None, meshes: list | None = None) -> list:
     """``_light_fluxes`` of the lights that send photons: some flux, a photon share above 0."""
-    return [entry for entry in _light_fluxes(scene, target) if np.any(entry[1] > 0)
+    return [entry for entry in _light_fluxes(scene, target, meshes) if np.any(entry[1] > 0)
             and getattr(entry[2][1], "photon_share", 1.0) > 0]
 
 
@@ -303,14 +314,15 @@ def _disc_photons(world, center, radius, back, u, v, n, pool=None):
 
 
 def emit_photons(scene: Scene, count: int, rng: np.random.Generator,
-                 accel=None, target=None, pool=None) -> EmittedPhotons:
+                 accel=None, target=None, pool=None, meshes: list | None = None) -> EmittedPhotons:
     """``count`` photons shared among the lights in proportion to their flux. ``accel``:
     the scene's ``Accelerator``, which photons through light portals need (a photon whose
     way out to the sky is blocked carries nothing). ``target``: the sphere the sun's and the
     world's photons are aimed at (``_light_fluxes``; the caustic map's
     ``specular_bounds``). ``pool``: threads that draw the world's disc photons in batches
-    (the same photons without)."""
-    lights = _photon_lights(scene, target)
+    (the same photons without). ``meshes``: ``emissive_meshes(scene)``, when the caller
+    has it."""
+    lights = _photon_lights(scene, target, meshes)
     if not lights or count <= 0:
         z = np.zeros((0, 3))
         return EmittedPhotons(z, z.copy(), z.copy())
@@ -1092,7 +1104,9 @@ def _concatenate(maps: list) -> PhotonMap:
 
 def build_photon_map(scene: Scene, accel, count: int, seed: int = 0, max_bounces: int = 128,
                      keep: str = "all", library: str = "pykdtree", workers: int = 1,
-                     pool=None, progress=None, cancelled=None, ray_log: list | None = None) -> PhotonMap:
+                     pool=None, progress=None, cancelled=None, ray_log: list | None = None,
+                     surfaces: SceneSurfaces | None = None,
+                     meshes: list | None = None) -> PhotonMap:
     """Emit ``count`` photons, trace them in chunks of ``PHOTON_CHUNK`` on ``pool`` (or a new
     pool of ``workers`` threads), keep ``"all"`` stored photons or only the ``"indirect"``
     ones (bounced at least once: what the ``full`` mode adds to exact direct light), and
@@ -1102,31 +1116,32 @@ def build_photon_map(scene: Scene, accel, count: int, seed: int = 0, max_bounces
     Chunk i traces with its own random stream (seed, STREAM_PHOTON, i + 1), so a fixed seed
     gives the same map whatever the scheduling. ``progress(fraction)`` is called after each
     chunk and ``cancelled()`` polled; a cancelled pass returns the photons traced so far.
-    ``ray_log`` (a list) receives every traced batch of photon rays (for the benchmark)."""
+    ``ray_log`` (a list) receives every traced batch of photon rays (for the benchmark).
+    ``surfaces`` and ``meshes`` (``emissive_meshes``): the scene's, when the caller has them."""
     from concurrent.futures import ThreadPoolExecutor
 
     own_pool = pool is None and workers > 1 and count > PHOTON_CHUNK
     executor = ThreadPoolExecutor(workers) if own_pool else pool
     try:
         return _emit_and_trace(scene, accel, count, seed, max_bounces, keep, library, pool,
-                               executor, progress, cancelled, ray_log)
+                               executor, progress, cancelled, ray_log, surfaces, meshes)
     finally:
         if own_pool:
             executor.shutdown(wait=True, cancel_futures=True)
 
 
 def _emit_and_trace(scene, accel, count, seed, max_bounces, keep, library, pool, executor,
-                    progress, cancelled, ray_log) -> PhotonMap:
+                    progress, cancelled, ray_log, surfaces=None, meshes=None) -> PhotonMap:
     """``build_photon_map`` on ``executor`` (None: in this thread); ``pool``: the caller's,
     for the stages that take one as given."""
     t0 = time.perf_counter()
     emitted = emit_photons(scene, count, sampling.rng_for(seed, sampling.STREAM_PHOTON, 0), accel,
-                           pool=executor)
+                           pool=executor, meshes=meshes)
     emit_seconds = time.perf_counter() - t0
     n = len(emitted.origins)
     bounds = [(a, min(a + PHOTON_CHUNK, n)) for a in range(0, n, PHOTON_CHUNK)]
 
-    surfaces = SceneSurfaces(scene)
+    surfaces = surfaces or SceneSurfaces(scene)
 
     def trace(i):
         a, b = bounds[i]
@@ -1205,7 +1220,7 @@ STRONG_CAUSTIC_PASS = 0.5
 
 
 def specular_share(scene: Scene, accel, seed: int = 0, count: int = CAUSTIC_PILOT,
-                   surfaces: SceneSurfaces | None = None) -> tuple:
+                   surfaces: SceneSurfaces | None = None, meshes: list | None = None) -> tuple:
     """The share of the lights' photons whose first hit is a specular surface (mirror, glossy
     or glass, or a Principled specular layer: ``MaterialTable.is_transport_specular``): the
     projected size of the specular objects as the lights see them, measured by a pilot of
@@ -1214,12 +1229,14 @@ def specular_share(scene: Scene, accel, seed: int = 0, count: int = CAUSTIC_PILO
     ``transport_specular`` channel), against the flux of all the lights; and the mean share
     of what reaches those surfaces that they pass on. The sun's and the world's photons are
     aimed at ``specular_bounds``. Returns (share, flux share, passed share); zeros when no
-    light sees one."""
+    light sees one. ``meshes``: ``emissive_meshes(scene)``, when the caller has it."""
     surfaces = surfaces or SceneSurfaces(scene)
     if not surfaces.materials.has_transport_specular:
         return 0.0, 0.0, 0.0
+    if meshes is None:
+        meshes = emissive_meshes(scene, surfaces.materials)
     emitted = emit_photons(scene, count, sampling.rng_for(seed, sampling.STREAM_CAUSTIC, 0), accel,
-                           specular_bounds(scene, surfaces))
+                           specular_bounds(scene, surfaces), meshes=meshes)
     if len(emitted.origins) == 0:
         return 0.0, 0.0, 0.0
     _t, prim, bu, bv = accel.intersect(np.ascontiguousarray(emitted.origins, np.float32),
@@ -1231,7 +1248,8 @@ def specular_share(scene: Scene, accel, seed: int = 0, count: int = CAUSTIC_PILO
     total = float(weight.sum())
     # The flux share is against all the lights' flux, as if no photon were aimed (the sun's
     # and the world's through the scene's whole disc).
-    everything = sum(float(flux @ LUMINANCE) for _, flux, _spec in _photon_lights(scene))
+    everything = sum(float(flux @ LUMINANCE)
+                     for _, flux, _spec in _photon_lights(scene, meshes=meshes))
     met = float(weight[passed > 0].sum())
     if not total > 0 or not everything > 0 or not met > 0:
         return 0.0, 0.0, 0.0
@@ -1271,22 +1289,27 @@ def caustic_emission_count(stored: int, share: float) -> int:
 
 def build_caustic_map(scene: Scene, accel, emitted_count: int, seed: int = 0,
                       max_bounces: int = 64, k: int = 50, library: str = "pykdtree", pool=None,
-                      progress=None, cancelled=None) -> PhotonMap:
+                      progress=None, cancelled=None, surfaces: SceneSurfaces | None = None,
+                      meshes: list | None = None) -> PhotonMap:
     """The caustic photon map (Jensen 1996): ``emitted_count`` photons from the lights, in
     chunks of ``PHOTON_CHUNK`` emitted and traced one at a time (each chunk an independent,
     stratified emission whose power is divided by the number of chunks), keeping only the
     light -> specular+ -> diffuse paths (``trace_photons(caustic=True)``). ``stats`` add
     ``radius``: the cap on its estimates' radius, 4 x the median k-nearest radius measured
-    at up to 4096 of its own photons (so it follows the caustics' own density)."""
+    at up to 4096 of its own photons (so it follows the caustics' own density).
+    ``surfaces`` and ``meshes`` (``emissive_meshes``): the scene's, when the caller has them
+    (else made once here, not per chunk)."""
     t0 = time.perf_counter()
-    surfaces = SceneSurfaces(scene)
+    surfaces = surfaces or SceneSurfaces(scene)
+    if meshes is None:
+        meshes = emissive_meshes(scene, surfaces.materials)
     chunks = max(1, int(np.ceil(emitted_count / PHOTON_CHUNK)))
     size = int(np.ceil(emitted_count / chunks))
     target = specular_bounds(scene, surfaces)
 
     def trace(i):
         rng = sampling.rng_for(seed, sampling.STREAM_CAUSTIC, i + 1)
-        emitted = emit_photons(scene, size, rng, accel, target)
+        emitted = emit_photons(scene, size, rng, accel, target, meshes=meshes)
         emitted.power /= chunks
         return trace_photons(scene, accel, emitted, rng, max_bounces=max_bounces,
                              surfaces=surfaces, caustic=True)

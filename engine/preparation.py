@@ -39,7 +39,7 @@ from .indirect import CachedIndirect, CausticEstimate, FinalGather, PhotonEstima
 from .lights import LightSet
 from .photons import (CAUSTIC_PILOT, MIN_CAUSTIC_FLUX, STRONG_CAUSTIC_PASS, auto_caustic_stored, auto_max_radius, auto_photon_count,
                       build_caustic_map, build_photon_map, caustic_emission_count,
-                      specular_share)
+                      emissive_meshes, specular_share)
 from .plan import Plan, make_plan
 from .report import RenderReport
 from .scene import Scene, SceneError
@@ -69,6 +69,7 @@ class Prepared:
     cone: float | None = None          # the cone filter's k, None without it
     cancelled: bool = False
     fingerprint: str | None = None     # of the artifacts given, checked
+    meshes: list | None = None         # photons.emissive_meshes, shared by the photon passes
 
     def close(self) -> None:
         self.pool.shutdown(wait=True, cancel_futures=True)
@@ -144,6 +145,14 @@ def prepare(scene: Scene, settings: RenderSettings, progress, cancelled,
     return prep
 
 
+def _emissive_meshes(prep: Prepared, scene) -> list:
+    """The scene's emissive meshes as the photon passes read them (``photons.
+    emissive_meshes``), made once a render: a textured emission's parts cost 35 ms."""
+    if prep.meshes is None:
+        prep.meshes = emissive_meshes(scene, prep.surfaces.materials)
+    return prep.meshes
+
+
 def _caustics(prep: Prepared, scene, settings, tell, cancelled):
     """Stage 5a: the caustic photon map where the lights' photons meet specular surfaces
     first: a pilot measures the share that does (``photons.specular_share``), which sets the
@@ -152,7 +161,8 @@ def _caustics(prep: Prepared, scene, settings, tell, cancelled):
     report, plan = prep.report, prep.plan
     t0 = time.perf_counter()
     share, flux_share, passed = specular_share(scene, prep.accel, settings.seed,
-                                               surfaces=prep.surfaces)
+                                               surfaces=prep.surfaces,
+                                               meshes=_emissive_meshes(prep, scene))
     if not share > 0:
         plan.set("caustics", False, f"no light's photons meet a specular or glass surface "
                                     f"first (a pilot of {CAUSTIC_PILOT:,})")
@@ -169,7 +179,8 @@ def _caustics(prep: Prepared, scene, settings, tell, cancelled):
     cmap = build_caustic_map(scene, prep.accel, count, seed=settings.seed,
                              max_bounces=settings.bounces, k=settings.photon_k, pool=prep.pool,
                              progress=lambda f: tell(0.0, f"Caustics: {f:.0%} traced"),
-                             cancelled=cancelled)
+                             cancelled=cancelled, surfaces=prep.surfaces,
+                             meshes=_emissive_meshes(prep, scene))
     stats = cmap.stats
     report.stage("caustics", time.perf_counter() - t0, specular_share=round(share, 6),
                  flux_share=round(flux_share, 6), passed_share=round(passed, 4),
@@ -202,7 +213,7 @@ def _photons(prep: Prepared, scene, settings, tell, cancelled, artifacts):
             scene, prep.accel, count, seed=settings.seed, max_bounces=settings.bounces,
             keep="indirect" if settings.mode == "full" and not plan["final_gather"] else "all",
             pool=pool, progress=lambda f: tell(0.0, f"Photons: {f:.0%} of {count:,} traced"),
-            cancelled=cancelled)
+            cancelled=cancelled, surfaces=prep.surfaces, meshes=_emissive_meshes(prep, scene))
         photon_seconds = time.perf_counter() - t0
     prep.photon_map = pmap
     prep.radius = radius = (settings.photon_radius
