@@ -36,7 +36,11 @@ Sampling
     uniformly; the world is sampled with cosine-distributed directions (E = pi L V). Sphere
     lights sample the cone they subtend uniformly (the standard sphere-light sampling; Cycles
     ``point_light_sample``), cosine directions from inside, and their facing disk by area; a
-    spot's mask is evaluated on each sample's direction (``SphereLight``).
+    spot's mask is evaluated on each sample's direction (``SphereLight``). A mesh whose
+    emission is textured (``TexturedTriangleEmitter``) draws half its samples by solid angle
+    x each triangle's mean luminance, half from about 4096 parts by their power (area x mean
+    luminance, as its photons leave), weighted by the balance heuristic (one-sample MIS,
+    Veach 1997 §9.2.4); each sample reads the radiance at its own point.
     ``seen_light_radiance`` gives what camera rays after a bounce see of the lights that are
     not geometry (``ray_visible``).
 
@@ -505,17 +509,26 @@ def emitter_parts(scene, materials, triangles: np.ndarray, parts: int):
     return corners, parents, bary, radiance.reshape(len(corners), k, 3).mean(axis=1)
 
 
+# A textured emitter's light samples (``TexturedTriangleEmitter``): this share by solid angle
+# over its triangles, the rest from about ``TEXTURED_LIGHT_PARTS`` parts by their power (area
+# x mean luminance, floored at ``TEXTURED_EMITTER_FLOOR`` of the brightest's, as its photons
+# are), weighted by the balance heuristic of the two densities.
+TEXTURED_SOLID_ANGLE_SHARE = 0.5
+TEXTURED_LIGHT_PARTS = 4096
+
+
 def textured_emitter(name: str, scene, materials, triangles: np.ndarray, two_sided: bool):
     """The light-sampling emitter of a mesh whose emission is textured (issue 24), or None
     where it emits nothing: its triangles (indices ``triangles`` into the scene) cut into
     ``TEXTURED_EMITTER_TRIANGLES`` sub-triangles (at least the triangles themselves), each
-    with its mean radiance over ``TEXTURED_EMITTER_POINTS`` points; one ``TriangleEmitter``
-    whose sub-triangles are sampled by that radiance's luminance (floored at
-    ``TEXTURED_EMITTER_FLOOR`` of the brightest's, so that no part that emits goes
-    unsampled), and whose samples read the texture at their own points (``radiance_at``,
-    ``sample_rgb``): the estimate is unbiased, the sub-triangles only shape its noise. One
-    light, as Cycles samples a textured emissive mesh: three lights, one per colour channel,
-    paid every light sample's solid angles, shadow rays and shadow photons three times."""
+    with its mean radiance over ``TEXTURED_EMITTER_POINTS`` points, sampled by solid angle x
+    that radiance's luminance (floored at ``TEXTURED_EMITTER_FLOOR`` of the brightest's, so
+    that no part that emits goes unsampled); and the same triangles cut into about
+    ``TEXTURED_LIGHT_PARTS`` parts, sampled by their power (``TexturedTriangleEmitter``).
+    Its samples read the texture at their own points (``radiance_at``, ``sample_rgb``): the
+    estimate is unbiased, the strategies only shape its noise. One light, as Cycles samples a
+    textured emissive mesh: three lights, one per colour channel, paid every light sample's
+    solid angles, shadow rays and shadow photons three times."""
     corners, parents, _bary, radiance = emitter_parts(scene, materials, triangles,
                                                       TEXTURED_EMITTER_TRIANGLES)
     luminance = radiance @ LUMINANCE
@@ -526,13 +539,7 @@ def textured_emitter(name: str, scene, materials, triangles: np.ndarray, two_sid
     # Per sub-triangle, the linear map from a point on its scene triangle's plane to that
     # triangle's barycentrics (least squares on the plane): (bu, bv) = rows @ (p - origin).
     t = scene.triangles[parents].astype(np.float64)
-    e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
-    a11, a12, a22 = _dot(e1, e1), _dot(e1, e2), _dot(e2, e2)
-    det = a11 * a22 - a12 * a12
-    det = np.where(np.abs(det) > 1e-300, det, 1.0)[:, None]
-    rows = np.stack([(a22[:, None] * e1 - a12[:, None] * e2) / det,
-                     (a11[:, None] * e2 - a12[:, None] * e1) / det], axis=1)   # (S, 2, 3)
-    origin = t[:, 0]
+    rows, origin = _barycentric_rows(t)
 
     def radiance_at(tri, points):
         bary = np.einsum("nij,nj->ni", np.take(rows, tri, axis=0),
@@ -543,9 +550,168 @@ def textured_emitter(name: str, scene, materials, triangles: np.ndarray, two_sid
         return materials.at(scene.material_ids[prim], prim, bu, bv).emitted_radiance
 
     scale = np.maximum(luminance / peak, TEXTURED_EMITTER_FLOOR)
-    return TriangleEmitter(name, corners, radiance[brightest], two_sided=two_sided,
-                           in_bvh=True, scale=scale, radiance_at=radiance_at,
-                           mean_radiance=radiance)
+    parts = emitter_parts(scene, materials, triangles, TEXTURED_LIGHT_PARTS)
+    if len(parts[0]) != len(triangles) * _segments(len(triangles), TEXTURED_LIGHT_PARTS) ** 2 \
+            or len(corners) != len(triangles):
+        return TriangleEmitter(name, corners, radiance[brightest], two_sided=two_sided,
+                               in_bvh=True, scale=scale, radiance_at=radiance_at,
+                               mean_radiance=radiance)
+    part_luminance = parts[3] @ LUMINANCE
+    part_luminance = np.maximum(part_luminance, TEXTURED_EMITTER_FLOOR * part_luminance.max())
+    return TexturedTriangleEmitter(name, corners, radiance[brightest], two_sided=two_sided,
+                                   scale=scale, radiance_at=radiance_at, mean_radiance=radiance,
+                                   parts=(parts[0], part_luminance,
+                                          _segments(len(triangles), TEXTURED_LIGHT_PARTS)),
+                                   rows=rows, origin=origin)
+
+
+def _segments(triangles: int, parts: int) -> int:
+    """The cuts per edge that ``emitter_parts`` makes of each of ``triangles`` triangles for
+    about ``parts`` parts."""
+    return max(1, int(np.sqrt(parts / max(triangles, 1))))
+
+
+def _barycentric_rows(t: np.ndarray):
+    """For triangles t (T, 3, 3): the maps (T, 2, 3) and origins (T, 3) with which a point p
+    on a triangle's plane has barycentrics (bu, bv) = rows @ (p - origin)."""
+    e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+    a11, a12, a22 = _dot(e1, e1), _dot(e1, e2), _dot(e2, e2)
+    det = a11 * a22 - a12 * a12
+    det = np.where(np.abs(det) > 1e-300, det, 1.0)[:, None]
+    rows = np.stack([(a22[:, None] * e1 - a12[:, None] * e2) / det,
+                     (a11[:, None] * e2 - a12[:, None] * e1) / det], axis=1)   # (T, 2, 3)
+    return rows, t[:, 0]
+
+
+class TexturedTriangleEmitter(TriangleEmitter):
+    """A textured emissive mesh's light (``textured_emitter``): one sample in
+    ``TEXTURED_SOLID_ANGLE_SHARE`` is drawn as ``TriangleEmitter`` draws (solid angle x each
+    triangle's mean luminance), the others from its parts, picked by their power and
+    uniform on each; a sample of either counts cos(theta_x) / (s p_solid + (1 - s) p_parts)
+    (one-sample MIS, balance heuristic), so that a small bright texel is found by the parts
+    and a large dim emitter close by keeps its solid-angle sampling. ``parts``: (corners
+    (T s^2, 3, 3) of the ``subdivide_triangles`` cut of each triangle into s^2, their
+    luminance (T s^2,), s); ``rows``, ``origin``: ``_barycentric_rows`` of the triangles."""
+
+    def __init__(self, name, triangles, radiance, two_sided, scale, radiance_at, mean_radiance,
+                 parts, rows, origin):
+        super().__init__(name, triangles, radiance, two_sided=two_sided, in_bvh=True,
+                         scale=scale, radiance_at=radiance_at, mean_radiance=mean_radiance)
+        corners, luminance, segments = parts
+        e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+        self.part_corners = corners
+        self.part_areas = 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
+        weights = self.part_areas * luminance
+        self.part_prob = weights / weights.sum()
+        self.part_cdf = np.cumsum(self.part_prob)
+        self.segments = int(segments)
+        self.rows, self.origin = rows, origin
+        # (i, j, upper?) -> the part's index within its triangle, in ``subdivide_triangles``'
+        # order: the upright (i, j) first, then the inverted ones.
+        s = self.segments
+        table = np.zeros((s, s, 2), np.int64)
+        k = 0
+        for i in range(s):
+            for j in range(s - i):
+                table[i, j, 0] = k
+                k += 1
+        for i in range(s):
+            for j in range(s - i - 1):
+                table[i, j, 1] = k
+                k += 1
+        self.part_table = table
+
+    def _part_of(self, tri, points):
+        """The part (N,) holding each point on triangle ``tri`` (N,)."""
+        bary = np.einsum("nij,nj->ni", np.take(self.rows, tri, axis=0),
+                         points - np.take(self.origin, tri, axis=0))
+        s = self.segments
+        su = np.clip(bary[:, 0], 0.0, 1.0) * s
+        sv = np.clip(bary[:, 1], 0.0, 1.0) * s
+        i = np.clip(np.floor(su).astype(np.int64), 0, s - 1)
+        j = np.clip(np.floor(sv).astype(np.int64), 0, s - 1 - i)
+        inverted = ((su - i) + (sv - j) >= 1.0) & (i + j < s - 1)
+        return tri * s * s + self.part_table[i, j, inverted.astype(np.int64)]
+
+    def _parts_pdf(self, tri, points, dist, direction):
+        """The parts strategy's density [1/sr] of the directions to ``points`` on ``tri``."""
+        part = self._part_of(tri, points)
+        cos_l = np.abs(_dot(direction, self.normals[tri]))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            pdf = self.part_prob[part] / self.part_areas[part] * dist * dist / cos_l
+        return np.where(np.isfinite(pdf) & (cos_l > 0), pdf, 0.0)
+
+    def _sample_parts(self, x, n, u):
+        """Directions, distances and triangles of samples drawn from the parts."""
+        part = np.minimum(np.searchsorted(self.part_cdf, u[:, 0] * self.part_cdf[-1],
+                                          side="right"), len(self.part_prob) - 1)
+        lower = np.where(part > 0, self.part_cdf[np.maximum(part - 1, 0)], 0.0)
+        share = self.part_prob[part]
+        u0 = np.clip((u[:, 0] * self.part_cdf[-1] - lower) / np.where(share > 0, share, 1.0),
+                     0.0, 1.0 - 1e-12)
+        bary = sampling.square_to_triangle(np.stack([u0, u[:, 1]], 1))
+        c = self.part_corners[part]
+        p = c[:, 0] * (1 - bary[:, 0:1] - bary[:, 1:2]) + c[:, 1] * bary[:, 0:1] \
+            + c[:, 2] * bary[:, 1:2]
+        d = p - x
+        dist = np.sqrt(np.maximum(_dot(d, d), 1e-300))
+        return d / dist[:, None], dist, part // (self.segments * self.segments)
+
+    def _mixed(self, x, n, u):
+        """Directions, distances, triangles and cos(theta_x) / (mixed density) x facing."""
+        share = TEXTURED_SOLID_ANGLE_SHARE
+        solid = u[:, 0] < share
+        direction = np.zeros((len(x), 3))
+        dist = np.zeros(len(x))
+        tri = np.zeros(len(x), np.int64)
+        if solid.any():
+            us = np.stack([u[solid, 0] / share, u[solid, 1]], 1)
+            d, r, _pdf, t, valid, _cos, _facing = self._sample_directions(x[solid], n[solid], us)
+            direction[solid], dist[solid], tri[solid] = d, np.where(valid, r, 0.0), t
+        rest = ~solid
+        if rest.any():
+            up = np.stack([(u[rest, 0] - share) / (1.0 - share), u[rest, 1]], 1)
+            direction[rest], dist[rest], tri[rest] = self._sample_parts(x[rest], n[rest], up)
+        p_solid = TriangleEmitter.solid_angle_pdf(self, x, n, direction)
+        points = x + direction * dist[:, None]
+        p_parts = self._parts_pdf(tri, points, dist, direction)
+        cos_x = np.maximum(_dot(n, direction), 0.0)
+        facing = self._facing(x, tri, direction)
+        valid = (dist > 0) & np.isfinite(dist) & ~self.on_surface(x, n, tri)
+        weight = _over_pdf(valid, cos_x * facing, share * p_solid + (1.0 - share) * p_parts)
+        return direction, np.where(valid, dist, 0.0), tri, weight
+
+    def sample(self, x, n, u):
+        """``TriangleEmitter.sample``'s estimates, in units of ``rgb`` (the radiance read at
+        each sample, over ``rgb``'s luminance)."""
+        direction, dist, weight, rgb = self.sample_rgb(x, n, u)
+        return direction, dist, weight * (rgb @ LUMINANCE) / max(float(self.rgb @ LUMINANCE),
+                                                                 1e-300)
+
+    def sample_rgb(self, x, n, u, pick=None):
+        """``TriangleEmitter.sample_rgb`` by the two strategies of the class docstring."""
+        direction, dist, tri, weight = self._mixed(x, n, u)
+        rgb = np.zeros((len(x), 3))
+        live = np.flatnonzero(weight > 0)
+        if len(live):
+            rgb[live] = self.radiance_at(np.take(tri, live), np.take(x, live, axis=0)
+                                         + np.take(direction, live, axis=0)
+                                         * np.take(dist, live)[:, None])
+        return direction, dist, weight, rgb
+
+    def solid_angle_pdf(self, points, normals, wi):
+        """(N,) the mixed density [1/sr] with which ``sample`` gives ``wi`` from ``points``."""
+        x = np.asarray(points, np.float64).reshape(-1, 3)
+        w = np.asarray(wi, np.float64).reshape(-1, 3)
+        share = TEXTURED_SOLID_ANGLE_SHARE
+        pdf = share * TriangleEmitter.solid_angle_pdf(self, x, normals, w)
+        tri, t = self.nearest_triangle(x, w)
+        hit = np.flatnonzero(tri >= 0)
+        if len(hit):
+            k, r = tri[hit], t[hit]
+            pdf[hit] += (1.0 - share) * self._parts_pdf(k, x[hit] + w[hit] * r[:, None], r,
+                                                         w[hit])
+        return pdf
 
 
 def area_light_triangles(light: AreaLight) -> np.ndarray:
