@@ -76,7 +76,6 @@ from .textures import DIFFUSE_RAY, ray_after_bounce
 ROULETTE_WEIGHT = 0.5      # continuations of smaller weight go on by Russian roulette
 
 LOOKUP_NEIGHBOURS = 4       # nearest estimates inspected for one with an agreeing normal
-WIDE_LOOKUP_NEIGHBOURS = 32  # ... and, where none of those agrees, this many
 DISC_THICKNESS = 0.25       # a look-up's disc, as the photon estimate's (photons.py)
 GUIDE_PHOTONS = 128         # nearby photons whose directions steer a guided gather
 GATHER_RAYS_PER_CALL = 1 << 19   # rays in flight per chunk of final_gather (~150 B a ray)
@@ -162,8 +161,8 @@ class RadianceEstimates:
 
     def surface_lookup(self, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
         """Irradiance (N, 3) of the nearest estimate whose normal agrees with ``normals``
-        (n . n_i > 0.5) among the ``LOOKUP_NEIGHBOURS`` nearest, then among the
-        ``WIDE_LOOKUP_NEIGHBOURS`` nearest; 0 where none does. With a finite ``max_radius`` only estimates within it and within ``DISC_THICKNESS`` x it of
+        (n . n_i > 0.5) among the ``LOOKUP_NEIGHBOURS`` nearest; 0 where none does. With a
+        finite ``max_radius`` only estimates within it and within ``DISC_THICKNESS`` x it of
         the point's tangent plane count, as photons in the estimate's disc (Fig. 9.5): a
         surface without photons nearby (the floor under a closed lamp shade) must not take
         the irradiance of the far side of a shell."""
@@ -199,19 +198,6 @@ class RadianceEstimates:
             rows = np.arange(len(rest))
             found = ok[rows, first]
             out[rest[found]] = np.take(self.irradiance, others[rows, first][found], axis=0)
-            # By a corner the nearest few may all lie on the other surface (a bright floor's
-            # estimates crowd round the foot of a dim wall): look further before giving 0.
-            wide = int(min(WIDE_LOOKUP_NEIGHBOURS, len(self)))
-            still = rest[~found]
-            if len(still) and wide > kk:
-                others = nearest(np.ascontiguousarray(pts32[still]), wide)[:, kk:]
-                cols = others.shape[1]
-                ok = self._agrees(others.reshape(-1), np.repeat(pts32[still], cols, axis=0),
-                                  np.repeat(nrm[still], cols, axis=0), bounded).reshape(-1, cols)
-                first = np.argmax(ok, axis=1)
-                rows = np.arange(len(still))
-                found = ok[rows, first]
-                out[still[found]] = np.take(self.irradiance, others[rows, first][found], axis=0)
         return out
 
     def _agrees(self, idx, points32, normals32, bounded: bool) -> np.ndarray:

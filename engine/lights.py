@@ -664,15 +664,18 @@ class TexturedTriangleEmitter(TriangleEmitter):
         direction = np.zeros((len(x), 3))
         dist = np.zeros(len(x))
         tri = np.zeros(len(x), np.int64)
+        p_solid = np.zeros(len(x))
         if solid.any():
             us = np.stack([u[solid, 0] / share, u[solid, 1]], 1)
-            d, r, _pdf, t, valid, _cos, _facing = self._sample_directions(x[solid], n[solid], us)
+            d, r, pdf, t, valid, _cos, _facing = self._sample_directions(x[solid], n[solid], us)
             direction[solid], dist[solid], tri[solid] = d, np.where(valid, r, 0.0), t
+            p_solid[solid] = pdf                 # the density it drew them with
         rest = ~solid
         if rest.any():
             up = np.stack([(u[rest, 0] - share) / (1.0 - share), u[rest, 1]], 1)
             direction[rest], dist[rest], tri[rest] = self._sample_parts(x[rest], n[rest], up)
-        p_solid = TriangleEmitter.solid_angle_pdf(self, x, n, direction)
+            p_solid[rest] = TriangleEmitter.solid_angle_pdf(self, x[rest], n[rest],
+                                                            direction[rest])
         points = x + direction * dist[:, None]
         p_parts = self._parts_pdf(tri, points, dist, direction)
         cos_x = np.maximum(_dot(n, direction), 0.0)

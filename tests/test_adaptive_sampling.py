@@ -7,9 +7,15 @@ bpy, about 15 s).
 * A box on a plane under a uniform sky (24 x 24 px, 8 spp, 2 light samples; the box's edges,
   its sky shadow and the cache make the noise): at threshold 0.01 the extra samples use the
   block's budget (at most half its own samples again) and the image's squared error against
-  a 512-spp render falls to 0.73 x the plain render's (seeds 1-12: 0.61-0.85, sd 0.086; the
-  test takes the mean of seeds 1-4, bound 0.90 = mean + 4 sd of a 4-seed mean). The mean of
-  12 seeds is +0.19 % off that render's against the plain renders' +0.11 % (se 0.10 %); with
+  a 512-spp render of the same seed (its photons, so that what is left is the pixels' noise,
+  which adaptive sampling acts on) falls to 0.76 x the plain render's (seeds 1-12:
+  0.60-0.87, sd 0.087; the test takes the mean of seeds 1-4, bound 0.93 = mean + 4 sd of a
+  4-seed mean; measured 2026-12-07). Against one 512-spp render of seed 9, as this test first
+  did, the photon maps' differences count too: 0.73 then, 0.79 (sd 0.14) since photon
+  estimates count only their disc's covered part (``Accelerator.disc_coverage``: the box's
+  foot is brighter and its estimates' noise with it), where 4 sd no longer stays below 1.
+  Measured then: the mean of 12 seeds +0.19 % off that render's against the plain renders'
+  +0.11 % (se 0.10 %); with
   each pixel's noise judged by its own estimate alone (Cycles' way) it was +0.35 % (at twice
   the budget), the pixels whose samples came out dark getting the extra ones (measured, not
   asserted: 12 seeds of both would be needed).
@@ -49,12 +55,12 @@ def _render(scene, seed, **settings):
 
 def test_extra_samples_within_the_budget_lower_the_error():
     scene = _box_yard(World(radiance=np.array([0.6, 0.5, 0.4])))
-    reference, _ = _render(scene, 9, samples=512)
     ratios = []
     for seed in (1, 2, 3, 4):
+        reference, _ = _render(scene, seed, samples=512)     # the same seed's photons
         plain, _ = _render(scene, seed)
         image, camera = _render(scene, seed, noise_threshold=0.01)
         assert 0 < camera["adaptive_samples"] <= 0.5 * 8 * 24 * 24, camera["adaptive_samples"]
         assert camera["camera_rays"] == 8 * 24 * 24 + camera["adaptive_samples"]
         ratios.append(np.mean((image - reference) ** 2) / np.mean((plain - reference) ** 2))
-    assert np.mean(ratios) < 0.90, ratios
+    assert np.mean(ratios) < 0.93, ratios

@@ -113,12 +113,12 @@ def test_uncovered_samples_share_batch_local_records(monkeypatch):
     """Camera samples no record covers (edges, the gaps the neighbour check leaves) make
     records of their own within their batch (``indirect.LOCAL_STEPS``) instead of a gather
     each. On the indirect-shadow scene (8 spp, a = 0.3), against a gather at every uncovered
-    sample (``LOCAL_STEPS = ()``), seeds 3-8 (2026-12-07): 0.14-0.19 of the gathers and the
-    worst 4 x 4 block 0.09-0.52 % apart (mean 0.23 %, SD 0.15 %). Since photon estimates
+    sample (``LOCAL_STEPS = ()``), seeds 3-8 (2026-12-07): 0.13-0.18 of the gathers and the
+    worst 4 x 4 block 0.18-0.47 % apart (mean 0.31 %, SD 0.12 %). Since photon estimates
     count only the part of their disc that their surface covers (``Accelerator.
     disc_coverage``), the room's edges are brighter and a record's gather by them noisier:
     with the whole disc, 0.16-0.29 % on the same seeds (0.05-0.25 %, mean 0.13 %, SD 0.08 %
-    when this test was written). Bounds: at most 0.6 of the gathers and 0.85 % (mean + 4
+    when this test was written). Bounds: at most 0.6 of the gathers and 0.8 % (mean + 4
     SD); the same picture twice (the local records do not depend on the order batches
     finish)."""
     from lanterna.engine import indirect
@@ -136,7 +136,7 @@ def test_uncovered_samples_share_batch_local_records(monkeypatch):
     assert cam["cache_interpolated"] == cam_each["cache_interpolated"]
     np.testing.assert_array_equal(local.image, again.image)
     apart = np.abs(_blocks(local.image) / _blocks(each.image) - 1).max()
-    assert apart <= 0.0085, apart
+    assert apart <= 0.008, apart
 
 
 def test_thin_plate_lit_from_both_sides_keeps_its_sides_apart():
