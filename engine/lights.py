@@ -489,14 +489,20 @@ def subdivide_triangles(tris: np.ndarray, segments: int):
     return corners, parent, bary
 
 
+def _segments(triangles: int, parts: int) -> int:
+    """The cuts per edge that ``emitter_parts`` makes of each of ``triangles`` triangles for
+    about ``parts`` parts."""
+    return max(1, int(np.sqrt(parts / max(triangles, 1))))
+
+
 def emitter_parts(scene, materials, triangles: np.ndarray, parts: int):
     """The emitting triangles ``triangles`` (indices into the scene) cut into about ``parts``
     congruent sub-triangles (``subdivide_triangles``; at least the triangles themselves), and
     each one's mean radiance over ``TEXTURED_EMITTER_POINTS`` stratified points: (corners
     (S, 3, 3), the scene triangle of each (S,), their corners' barycentrics in it (S, 3, 2),
     mean radiance (S, 3) [W m^-2 sr^-1])."""
-    segments = max(1, int(np.sqrt(parts / max(len(triangles), 1))))
-    corners, parent, bary = subdivide_triangles(scene.triangles[triangles], segments)
+    corners, parent, bary = subdivide_triangles(scene.triangles[triangles],
+                                                _segments(len(triangles), parts))
     k = TEXTURED_EMITTER_POINTS
     u = sampling.square_to_triangle(sampling.stratified_2d(1, k, np.random.default_rng(0))
                                     .reshape(-1, 2))                  # (k, 2) in a sub-triangle
@@ -550,12 +556,9 @@ def textured_emitter(name: str, scene, materials, triangles: np.ndarray, two_sid
         return materials.at(scene.material_ids[prim], prim, bu, bv).emitted_radiance
 
     scale = np.maximum(luminance / peak, TEXTURED_EMITTER_FLOOR)
+    # The parts cut the emitter's own triangles (TEXTURED_EMITTER_TRIANGLES = 2 cuts none):
+    # part i lies on triangle i // s^2.
     parts = emitter_parts(scene, materials, triangles, TEXTURED_LIGHT_PARTS)
-    if len(parts[0]) != len(triangles) * _segments(len(triangles), TEXTURED_LIGHT_PARTS) ** 2 \
-            or len(corners) != len(triangles):
-        return TriangleEmitter(name, corners, radiance[brightest], two_sided=two_sided,
-                               in_bvh=True, scale=scale, radiance_at=radiance_at,
-                               mean_radiance=radiance)
     part_luminance = parts[3] @ LUMINANCE
     part_luminance = np.maximum(part_luminance, TEXTURED_EMITTER_FLOOR * part_luminance.max())
     return TexturedTriangleEmitter(name, corners, radiance[brightest], two_sided=two_sided,
@@ -563,12 +566,6 @@ def textured_emitter(name: str, scene, materials, triangles: np.ndarray, two_sid
                                    parts=(parts[0], part_luminance,
                                           _segments(len(triangles), TEXTURED_LIGHT_PARTS)),
                                    rows=rows, origin=origin)
-
-
-def _segments(triangles: int, parts: int) -> int:
-    """The cuts per edge that ``emitter_parts`` makes of each of ``triangles`` triangles for
-    about ``parts`` parts."""
-    return max(1, int(np.sqrt(parts / max(triangles, 1))))
 
 
 def _barycentric_rows(t: np.ndarray):
