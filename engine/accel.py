@@ -192,14 +192,13 @@ class Accelerator:
         lift = (COVERAGE_PROBE_OFFSETS * self.offset_distance(x))[:, None] * n     # (N, 3)
         reach = np.repeat(r, d)
         ends = np.repeat(r, d)
-        tri = self.triangles.astype(np.float64)
         for side in (1.0, -1.0):
             origins = np.repeat(x + side * lift, d, axis=0)
             t, prim, _u, _v = self.intersect(origins, ways, reach)
             hit = np.flatnonzero((prim >= 0) & (t < reach))
             if len(hit) == 0:
                 continue
-            corners = tri[prim[hit]]
+            corners = self.triangles[prim[hit]].astype(np.float64)    # the hit ones only
             face = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
             face /= np.maximum(np.linalg.norm(face, axis=1, keepdims=True), 1e-300)
             turned = np.abs(dot_rows(face, np.repeat(n, d, axis=0)[hit])) < COVERAGE_EDGE_COS
